@@ -1,0 +1,154 @@
+//! Rigid-body dynamics of (7.1), `M(q) qdd + C(q, qd) qd + g(q) = tau` (external wrench left to
+//! the caller as `J^T F_e`): recursive Newton-Euler, composite rigid body algorithm, forward
+//! dynamics by CRBA + Cholesky. Spatial quantities in base axes about the base origin.
+
+use nalgebra::Cholesky;
+
+use crate::kinematics::Frames;
+use crate::model::Robot;
+use crate::spatial::{cross_force, SpatialInertia, V3};
+use crate::{Mat6, Vec6};
+
+impl Robot {
+    /// Spatial inertias of the six bodies (link 6 with the tool) about the base origin.
+    #[inline(always)]
+    fn body_inertias(&self, frames: &Frames) -> [SpatialInertia; 6] {
+        std::array::from_fn(|i| self.bodies[i].in_base(&frames.rot[i + 1], &frames.pos[i + 1]))
+    }
+
+    /// Recursive Newton-Euler core: rigid-body torques for `(qd, qdd)` with the base accelerating
+    /// at `gravity_mps2` upwards (the usual trick for gravity). No armature, no friction.
+    #[inline(always)]
+    fn rnea_core(&self, frames: &Frames, inertias: &[SpatialInertia; 6], qd: &Vec6, qdd: &Vec6, gravity_mps2: f64) -> Vec6 {
+        let (mut vw, mut vv) = (V3::zeros(), V3::zeros());
+        let (mut aw, mut av) = (V3::zeros(), V3::new(0.0, 0.0, gravity_mps2));
+        let mut axes = [(V3::zeros(), V3::zeros()); 6];
+        let mut forces = [(V3::zeros(), V3::zeros()); 6];
+        for i in 0..6 {
+            let z = frames.joint_axis(i);
+            let sv = frames.pos[i].cross(&z);
+            vw += z * qd[i];
+            vv += sv * qd[i];
+            aw += z * qdd[i] + vw.cross(&z) * qd[i];
+            av += sv * qdd[i] + (vw.cross(&sv) + vv.cross(&z)) * qd[i];
+            let inertia = &inertias[i];
+            let (n_a, f_a) = inertia.apply(&aw, &av);
+            let (n_v, f_v) = inertia.apply(&vw, &vv);
+            let (n_c, f_c) = cross_force(&vw, &vv, &n_v, &f_v);
+            forces[i] = (n_a + n_c, f_a + f_c);
+            axes[i] = (z, sv);
+        }
+        let mut tau = Vec6::zeros();
+        let (mut n, mut f) = (V3::zeros(), V3::zeros());
+        for i in (0..6).rev() {
+            n += forces[i].0;
+            f += forces[i].1;
+            tau[i] = axes[i].0.dot(&n) + axes[i].1.dot(&f);
+        }
+        tau
+    }
+
+    /// Inverse dynamics (7.1) without external wrench: `M qdd + C qd + g + armature qdd +
+    /// viscous qd`.
+    pub fn rnea(&self, q: &Vec6, qd: &Vec6, qdd: &Vec6) -> Vec6 {
+        let frames = self.frames(q);
+        let inertias = self.body_inertias(&frames);
+        self.rnea_core(&frames, &inertias, qd, qdd, Self::GRAVITY_MPS2)
+            + self.armature.component_mul(qdd)
+            + self.viscous.component_mul(qd)
+    }
+
+    /// Gravity torque `g(q)` of (7.1).
+    pub fn gravity_torque(&self, q: &Vec6) -> Vec6 {
+        let frames = self.frames(q);
+        let inertias = self.body_inertias(&frames);
+        self.rnea_core(&frames, &inertias, &Vec6::zeros(), &Vec6::zeros(), Self::GRAVITY_MPS2)
+    }
+
+    /// Coriolis and centrifugal torque `C(q, qd) qd` of (7.1) (no friction).
+    pub fn coriolis(&self, q: &Vec6, qd: &Vec6) -> Vec6 {
+        let frames = self.frames(q);
+        let inertias = self.body_inertias(&frames);
+        self.rnea_core(&frames, &inertias, qd, &Vec6::zeros(), 0.0)
+    }
+
+    /// Viscous friction torque `viscous * qd` (zero by default).
+    pub fn friction_torque(&self, qd: &Vec6) -> Vec6 {
+        self.viscous.component_mul(qd)
+    }
+
+    /// Everything but `M qdd`: `C qd + g + viscous qd`.
+    pub fn bias_torque(&self, q: &Vec6, qd: &Vec6) -> Vec6 {
+        self.rnea(q, qd, &Vec6::zeros())
+    }
+
+    /// Composite rigid body algorithm on given frames (armature included).
+    #[inline(always)]
+    fn crba_core(&self, frames: &Frames, inertias: &[SpatialInertia; 6]) -> Mat6 {
+        let mut axes = [(V3::zeros(), V3::zeros()); 6];
+        for (i, axis) in axes.iter_mut().enumerate() {
+            let z = frames.joint_axis(i);
+            *axis = (z, frames.pos[i].cross(&z));
+        }
+        let mut m = Mat6::zeros();
+        let mut composite = SpatialInertia::default();
+        for j in (0..6).rev() {
+            composite.add(&inertias[j]);
+            let (n, f) = composite.apply(&axes[j].0, &axes[j].1);
+            for i in 0..=j {
+                let mij = axes[i].0.dot(&n) + axes[i].1.dot(&f);
+                m[(i, j)] = mij;
+                m[(j, i)] = mij;
+            }
+            m[(j, j)] += self.armature[j];
+        }
+        m
+    }
+
+    /// Joint-space mass matrix `M(q)` by the composite rigid body algorithm, armature included.
+    pub fn mass_matrix(&self, q: &Vec6) -> Mat6 {
+        let frames = self.frames(q);
+        let inertias = self.body_inertias(&frames);
+        self.crba_core(&frames, &inertias)
+    }
+
+    /// Mass matrix and bias torque `C qd + g + viscous qd` from one kinematics pass; what a
+    /// controller needs for (7.2).
+    pub fn mass_matrix_and_bias(&self, q: &Vec6, qd: &Vec6) -> (Mat6, Vec6) {
+        let frames = self.frames(q);
+        let inertias = self.body_inertias(&frames);
+        let m = self.crba_core(&frames, &inertias);
+        let bias = self.rnea_core(&frames, &inertias, qd, &Vec6::zeros(), Self::GRAVITY_MPS2)
+            + self.viscous.component_mul(qd);
+        (m, bias)
+    }
+
+    /// Forward dynamics: `qdd = M^-1 (tau - C qd - g - viscous qd)` by CRBA and a Cholesky
+    /// solve (M is symmetric positive definite; condition number ~1e6 from the small wrist
+    /// inertias, which Cholesky in f64 handles to ~1e-10 relative).
+    pub fn forward_dynamics(&self, q: &Vec6, qd: &Vec6, tau: &Vec6) -> Vec6 {
+        let (m, bias) = self.mass_matrix_and_bias(q, qd);
+        let rhs = tau - bias;
+        match Cholesky::new_unchecked(m).solve(&rhs) {
+            sol if sol.iter().all(|x| x.is_finite()) => sol,
+            _ => Vec6::from_element(f64::NAN),
+        }
+    }
+
+    /// Kinetic energy `qd^T M qd / 2` (J), armature included.
+    pub fn kinetic_energy(&self, q: &Vec6, qd: &Vec6) -> f64 {
+        0.5 * qd.dot(&(self.mass_matrix(q) * qd))
+    }
+
+    /// Potential energy `sum m_i g z_ci` (J), zero at base height.
+    pub fn potential_energy(&self, q: &Vec6) -> f64 {
+        let frames = self.frames(q);
+        (0..6)
+            .map(|i| {
+                let b = &self.bodies[i];
+                let c = frames.pos[i + 1] + frames.rot[i + 1] * b.com;
+                b.mass * Self::GRAVITY_MPS2 * c.z
+            })
+            .sum()
+    }
+}

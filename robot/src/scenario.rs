@@ -1,0 +1,29 @@
+//! The task pose of the default scenario (DESIGN section 3): the strip lies on a table at base
+//! z = 0.70 m and runs along base +x from about x = 0.88 m; the tool points straight down with
+//! the wheel axis along base y.
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use crate::Vec6;
+
+/// TCP pose with the tool pointing straight down at base point `(x_m, y_m, z_m)`.
+///
+/// Orientation: TCP/flange z = base -z (the tool axis, pointing down), x = base +x (along the
+/// strip), y = base -y (the wheel axis, across the strip); i.e. a rotation by pi about base x.
+/// This is the orientation reached from ABB's zero pose by tilting joint 5 forward, with joints
+/// 1, 4, 6 at zero (the non-flipped wrist).
+pub fn scenario_tcp_pose(x_m: f64, y_m: f64, z_m: f64) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(x_m, y_m, z_m),
+        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+    )
+}
+
+/// Seed for [`crate::Robot::ik_tcp`] near the scenario pose: elbow up, wrist not flipped,
+/// joints 1, 4, 6 at zero.
+pub const SCENARIO_IK_SEED: [f64; 6] = [0.0, 0.3, 0.2, 0.0, 1.0, 0.0];
+
+/// `SCENARIO_IK_SEED` as a vector.
+pub fn scenario_ik_seed() -> Vec6 {
+    Vec6::from(SCENARIO_IK_SEED)
+}

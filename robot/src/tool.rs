@@ -1,0 +1,49 @@
+//! The applicator-wheel tool on the flange (DESIGN section 3).
+//!
+//! Tool frame = flange frame (DH frame 6) translated by `tcp_offset_flange_m`; the tool adds no
+//! rotation. The wheel's axis is the flange y axis, so with the tool pointing straight down
+//! (flange z = base -z) and joints 1, 4, 6 near zero the wheel axis lies along base y, across a
+//! strip that runs along base x.
+
+use nalgebra::{Matrix3, Vector3};
+
+/// Rigid tool (bracket + applicator wheel) attached to the flange.
+///
+/// Defaults (documented in the README): 1 kg, modelled as a solid cylinder of radius 30 mm and
+/// length 100 mm along the flange z axis, COM at 50 mm; wheel radius 10 mm, wheel centre at
+/// 90 mm, and the TCP at the wheel's lowest point when the tool points down, i.e. 100 mm along
+/// flange z. The TCP is thus the nominal contact point with the strip.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tool {
+    pub mass_kg: f64,
+    /// Centre of mass in the flange frame (m).
+    pub com_flange_m: Vector3<f64>,
+    /// Inertia about the COM, flange axes (kg m^2).
+    pub inertia_com: Matrix3<f64>,
+    /// Tool centre point in the flange frame (m): the wheel's contact point.
+    pub tcp_offset_flange_m: Vector3<f64>,
+    pub wheel_radius_m: f64,
+}
+
+impl Tool {
+    /// Wheel centre in the flange frame: one wheel radius back from the TCP along flange z.
+    pub fn wheel_centre_flange_m(&self) -> Vector3<f64> {
+        self.tcp_offset_flange_m - Vector3::new(0.0, 0.0, self.wheel_radius_m)
+    }
+}
+
+impl Default for Tool {
+    fn default() -> Self {
+        let mass_kg = 1.0;
+        let (radius, length) = (0.03, 0.1);
+        let i_xx = mass_kg * (3.0 * radius * radius + length * length) / 12.0;
+        let i_zz = mass_kg * radius * radius / 2.0;
+        Tool {
+            mass_kg,
+            com_flange_m: Vector3::new(0.0, 0.0, 0.05),
+            inertia_com: Matrix3::from_diagonal(&Vector3::new(i_xx, i_xx, i_zz)),
+            tcp_offset_flange_m: Vector3::new(0.0, 0.0, 0.10),
+            wheel_radius_m: 0.010,
+        }
+    }
+}
