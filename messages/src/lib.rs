@@ -1,1 +1,278 @@
-//! placeholder
+//! The wire contract between `plant-sim` and a controller.
+//!
+//! Every payload is a `#[repr(C)]` plain-old-data record sent zero-copy over iceoryx2 shared memory
+//! (publish-subscribe), with an explicit, language-neutral `#[type_name]`. A peer written in C, C++
+//! or Python against iceoryx2's own bindings declares the same structs field for field; the byte
+//! layout of each record is pinned by the compile-time assertions at the bottom of this file and
+//! documented in `messages/README.md`.
+//!
+//! Units are SI (m, rad, s, N, N m). Joint quantities are in the order of the DH joints 1..6 of the
+//! IRB 2400 (thesis Table 7.1). Every record carries [`CONTRACT_VERSION`] in its first field; a
+//! peer with another version is refused (see [`check_version`]).
+
+pub mod qos;
+pub mod services;
+
+use iceoryx2::prelude::*;
+
+/// Version of this contract. Bump on any change of layout or meaning.
+pub const CONTRACT_VERSION: u32 = 1;
+
+/// Number of robot joints.
+pub const DOF: usize = 6;
+
+/// Plant loop state, as reported in [`JointState::plant_status`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum PlantStatus {
+    /// The plant runs and has not yet received a valid torque from any controller.
+    WaitingForController = 0,
+    /// Normal operation: the torque of the previous tick arrived in time and was applied.
+    Running = 1,
+    /// The torque for the previous tick was late, missing or refused; the last good one was held.
+    HoldingTorque = 2,
+    /// Too many consecutive misses: the plant applies gravity compensation plus joint damping.
+    SafeStop = 3,
+    /// The plant is shutting down; this is the last state it publishes. Controllers should exit.
+    ShuttingDown = 4,
+}
+
+impl PlantStatus {
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::WaitingForController,
+            1 => Self::Running,
+            2 => Self::HoldingTorque,
+            3 => Self::SafeStop,
+            4 => Self::ShuttingDown,
+            _ => return None,
+        })
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::WaitingForController => "waiting_for_controller",
+            Self::Running => "running",
+            Self::HoldingTorque => "holding_torque",
+            Self::SafeStop => "safe_stop",
+            Self::ShuttingDown => "shutting_down",
+        }
+    }
+}
+
+/// Controller state, as reported in [`JointTorque::controller_status`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum ControllerStatus {
+    /// Normal closed-loop operation.
+    Active = 0,
+    /// The controller is ramping in after (re)connecting to a running plant.
+    Starting = 1,
+    /// The controller detected a fault of its own and requests the plant's safe stop.
+    Fault = 2,
+}
+
+impl ControllerStatus {
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::Active,
+            1 => Self::Starting,
+            2 => Self::Fault,
+            _ => return None,
+        })
+    }
+}
+
+/// Frame in which [`Wrench`] is expressed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum WrenchFrame {
+    /// Sensor frame: axes of DH frame 6 (the flange), reference point at the tool centre point.
+    /// This is what a flange-mounted 6-axis force/torque sensor reports once its tool offset is set.
+    SensorAtTcp = 0,
+    /// Base axes, reference point at the tool centre point.
+    BaseAtTcp = 1,
+}
+
+/// Bit flags in [`JointState::flags`].
+pub mod state_flags {
+    /// The torque applied over the previous tick was held from an earlier tick (late/missing/refused).
+    pub const TORQUE_HELD: u32 = 1 << 0;
+    /// The torque for the previous tick was refused (NaN, infinite, out of limits or wrong version).
+    pub const TORQUE_REFUSED: u32 = 1 << 1;
+    /// The plant is in lockstep mode (waits for every torque).
+    pub const LOCKSTEP: u32 = 1 << 2;
+    /// The wheel is in contact with the strip.
+    pub const IN_CONTACT: u32 = 1 << 3;
+}
+
+/// Joint state of tick `tick`, published by the plant at the start of the tick (plant → controller).
+///
+/// `q`, `qd` are the state at simulated time `sim_time_s = tick * period`. The controller answers
+/// with a [`JointTorque`] carrying the same `tick`.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("rig::JointState")]
+#[repr(C)]
+pub struct JointState {
+    /// [`CONTRACT_VERSION`] of the sender.
+    pub contract_version: u32,
+    /// [`PlantStatus`] as u32.
+    pub plant_status: u32,
+    /// Tick number, 0-based, one tick per control period.
+    pub tick: u64,
+    /// Simulated time of this state, s.
+    pub sim_time_s: f64,
+    /// Joint positions, rad (DH convention of Table 7.1; ABB's zero is q = (0, -pi/2, 0, 0, 0, 0)).
+    pub q: [f64; DOF],
+    /// Joint velocities, rad/s.
+    pub qd: [f64; DOF],
+    /// Torque the plant applied over the previous tick, N m (what the controller's last answer became).
+    pub tau_applied: [f64; DOF],
+    /// Control period, s (1e-3 at 1 kHz).
+    pub period_s: f64,
+    /// [`state_flags`] bits.
+    pub flags: u32,
+    /// Consecutive ticks without a valid, timely torque.
+    pub consecutive_misses: u32,
+    /// Total ticks without a valid, timely torque since the plant started.
+    pub total_misses: u64,
+}
+
+/// End-effector wrench of tick `tick`, as a 6-axis force/torque sensor reports it (plant → controller).
+///
+/// This is the wrench the environment (strip) exerts ON the tool, F_e in (7.1) with the sign of
+/// the thesis: pressing the strip down gives a force along +y_task (= +z_base) on the tool.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("rig::Wrench")]
+#[repr(C)]
+pub struct Wrench {
+    pub contract_version: u32,
+    /// [`WrenchFrame`] as u32.
+    pub frame: u32,
+    pub tick: u64,
+    /// Force on the tool, N.
+    pub force: [f64; 3],
+    /// Torque on the tool about the reference point, N m.
+    pub torque: [f64; 3],
+}
+
+/// Joint torque command answering tick `tick` (controller → plant). Applied over [t_tick, t_tick + period).
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("rig::JointTorque")]
+#[repr(C)]
+pub struct JointTorque {
+    pub contract_version: u32,
+    /// [`ControllerStatus`] as u32.
+    pub controller_status: u32,
+    /// The tick of the [`JointState`] this torque answers.
+    pub tick: u64,
+    /// Identifies one controller process instance (e.g. pid << 32 | start nonce); a change tells the
+    /// plant that a different controller took over.
+    pub controller_id: u64,
+    /// Joint torques, N m.
+    pub tau: [f64; DOF],
+}
+
+/// Optional controller diagnostics for tick `tick` (controller → plant, recorded on `/controller`).
+///
+/// Task frame of DESIGN section 3: x = across the strip, y = strip normal (pressing is -y),
+/// z = along the strip; origin at the strip's start, bottom centre.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("rig::ControllerDiagnostics")]
+#[repr(C)]
+pub struct ControllerDiagnostics {
+    pub contract_version: u32,
+    /// 1 while the force law is active along task y, 0 in pure motion control.
+    pub force_control_active: u32,
+    pub tick: u64,
+    /// Force set-point along task y on the strip, N (negative = pressing, thesis sign).
+    pub force_ref_n: f64,
+    /// Measured contact force along task y on the strip, N (same sign as `force_ref_n`).
+    pub force_meas_n: f64,
+    /// TCP position reference in the task frame, m.
+    pub pos_ref_task_m: [f64; 3],
+    /// TCP position error (reference - actual) in the task frame, m.
+    pub pos_err_task_m: [f64; 3],
+    /// Orientation error as a rotation vector (log map on SO(3)), task axes, rad.
+    pub rot_err_task_rad: [f64; 3],
+    /// Integral state of the force loop, N s (0 if no integral action).
+    pub force_integral_ns: f64,
+    /// Controller compute time for this tick (wake to publish), ns.
+    pub compute_time_ns: u64,
+}
+
+/// Error returned when a peer speaks another contract version.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VersionMismatch {
+    pub ours: u32,
+    pub theirs: u32,
+    pub what: &'static str,
+}
+
+impl std::fmt::Display for VersionMismatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "contract version mismatch on {}: peer speaks version {}, this process speaks version {}",
+            self.what, self.theirs, self.ours
+        )
+    }
+}
+
+impl std::error::Error for VersionMismatch {}
+
+/// Refuse a record whose contract version differs from `ours`.
+pub fn check_version(ours: u32, theirs: u32, what: &'static str) -> Result<(), VersionMismatch> {
+    if ours == theirs {
+        Ok(())
+    } else {
+        Err(VersionMismatch { ours, theirs, what })
+    }
+}
+
+// Layout pins: a change here is a contract change (bump CONTRACT_VERSION and the README table).
+const _: () = {
+    use core::mem::{offset_of, size_of};
+    assert!(size_of::<JointState>() == 192);
+    assert!(offset_of!(JointState, tick) == 8);
+    assert!(offset_of!(JointState, q) == 24);
+    assert!(offset_of!(JointState, qd) == 72);
+    assert!(offset_of!(JointState, tau_applied) == 120);
+    assert!(offset_of!(JointState, period_s) == 168);
+    assert!(offset_of!(JointState, flags) == 176);
+    assert!(offset_of!(JointState, total_misses) == 184);
+    assert!(size_of::<Wrench>() == 64);
+    assert!(offset_of!(Wrench, force) == 16);
+    assert!(size_of::<JointTorque>() == 72);
+    assert!(offset_of!(JointTorque, tau) == 24);
+    assert!(size_of::<ControllerDiagnostics>() == 120);
+    assert!(offset_of!(ControllerDiagnostics, force_ref_n) == 16);
+    assert!(offset_of!(ControllerDiagnostics, compute_time_ns) == 112);
+};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn version_mismatch_names_both_versions() {
+        let e = check_version(1, 7, "joint torque").unwrap_err();
+        let s = e.to_string();
+        assert!(s.contains("version 7") && s.contains("version 1"), "{s}");
+        assert!(check_version(3, 3, "x").is_ok());
+    }
+
+    #[test]
+    fn status_codes_round_trip() {
+        for s in [
+            PlantStatus::WaitingForController,
+            PlantStatus::Running,
+            PlantStatus::HoldingTorque,
+            PlantStatus::SafeStop,
+            PlantStatus::ShuttingDown,
+        ] {
+            assert_eq!(PlantStatus::from_u32(s as u32), Some(s));
+        }
+        assert_eq!(PlantStatus::from_u32(99), None);
+        assert_eq!(ControllerStatus::from_u32(2), Some(ControllerStatus::Fault));
+    }
+}

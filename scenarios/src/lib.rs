@@ -1,1 +1,475 @@
-//! placeholder
+//! Scenario files: one TOML file describes a whole run (loop timing, robot, strip, contact,
+//! references, controller gains, recording). Unknown fields are rejected and every error names the
+//! file, the line and the field. Lengths in files may carry an explicit `_mm` suffix; everything is
+//! converted to SI by the accessors of the consumers.
+//!
+//! Every section has defaults equal to the default scenario (`scenarios/default.toml`), so a file
+//! only lists what it changes.
+
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Errors loading a scenario.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    #[error("cannot read scenario file {path}: {source}")]
+    Read { path: PathBuf, source: std::io::Error },
+    #[error("scenario file {path}, line {line}, column {column}: {message}")]
+    Parse { path: PathBuf, line: usize, column: usize, message: String },
+    #[error("scenario file {path}: field `{field}` = {value}: {why}")]
+    Invalid { path: PathBuf, field: &'static str, value: String, why: &'static str },
+}
+
+/// Loop mode of the plant (DESIGN section 6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Absolute 1 ms deadlines, a torque budget per tick, misses held and counted.
+    #[default]
+    Realtime,
+    /// Wait for every torque (with a watchdog); as fast as both processes allow; deterministic.
+    Lockstep,
+}
+
+impl std::str::FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "realtime" => Ok(Mode::Realtime),
+            "lockstep" => Ok(Mode::Lockstep),
+            other => Err(format!("unknown mode {other:?}: expected realtime or lockstep")),
+        }
+    }
+}
+
+/// The whole scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct Scenario {
+    /// Free text shown in summaries and recorded in the MCAP metadata.
+    pub description: String,
+    #[serde(rename = "loop")]
+    pub loop_: LoopConfig,
+    pub robot: RobotConfig,
+    pub strip: StripConfig,
+    pub bulge: BulgeConfig,
+    pub placement: PlacementConfig,
+    pub contact: ContactConfig,
+    pub trajectory: TrajectoryConfig,
+    pub controller: ControllerConfig,
+    pub recording: RecordingConfig,
+}
+
+/// Loop contract (DESIGN section 6).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoopConfig {
+    pub mode: Mode,
+    /// Control period, s.
+    pub period_s: f64,
+    /// Real-time mode: how long after publishing the state the plant waits for the torque, µs.
+    pub torque_budget_us: f64,
+    /// Consecutive misses that trigger the safe stop (libfranka stops after 20).
+    pub max_consecutive_misses: u32,
+    /// Lockstep mode: how long the plant waits for one torque before declaring the controller dead, s.
+    pub lockstep_watchdog_s: f64,
+    /// Run length, s (the launcher may override it). 0 = until the trajectory ends plus 0.2 s.
+    pub duration_s: f64,
+    /// Plant integration substeps per tick (robot RK4 and strip ZOH steps).
+    pub substeps: u32,
+    /// Safe stop joint damping, N m s/rad.
+    pub safe_stop_damping_nms: f64,
+    /// How long the torque is blended from the held value to a new controller's value, s.
+    pub takeover_blend_s: f64,
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Realtime,
+            period_s: 1e-3,
+            torque_budget_us: 500.0,
+            max_consecutive_misses: 20,
+            lockstep_watchdog_s: 2.0,
+            duration_s: 0.0,
+            substeps: 10,
+            safe_stop_damping_nms: 20.0,
+            takeover_blend_s: 0.05,
+        }
+    }
+}
+
+/// Robot and tool (DESIGN section 3); `plant_inertia_scale` ≠ 1 makes the plant's links heavier or
+/// lighter than the controller's model (robustness studies).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RobotConfig {
+    pub tool_mass_kg: f64,
+    /// Tool centre point (wheel centre) offset from the flange along the flange z axis, m.
+    pub tool_offset_m: f64,
+    pub wheel_radius_mm: f64,
+    /// Reflected motor inertia per joint, kg m².
+    pub armature_kgm2: [f64; 6],
+    /// Viscous joint friction, N m s/rad.
+    pub viscous_nms: [f64; 6],
+    /// Scale of every link and tool mass and inertia in the plant (1 = exact model).
+    pub plant_inertia_scale: f64,
+}
+
+impl Default for RobotConfig {
+    fn default() -> Self {
+        Self {
+            tool_mass_kg: 1.0,
+            tool_offset_m: 0.1,
+            wheel_radius_mm: 10.0,
+            armature_kgm2: [0.0; 6],
+            viscous_nms: [0.0; 6],
+            plant_inertia_scale: 1.0,
+        }
+    }
+}
+
+/// Weatherstrip model (DESIGN section 4).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StripConfig {
+    /// `false` runs the robot alone (no strip, no contact).
+    pub enabled: bool,
+    pub length_mm: f64,
+    pub element_mm: f64,
+    pub youngs_modulus_pa: f64,
+    pub poisson: f64,
+    pub density_kg_m3: f64,
+    /// Reduced model order (states).
+    pub order: usize,
+    /// "bonded" or "sliding".
+    pub boundary: String,
+    /// Craig–Bampton fixed-interface mode cut-off, Hz.
+    pub cutoff_hz: f64,
+    /// Rayleigh damping B = alpha M + beta K (5.24).
+    pub damping_alpha: f64,
+    pub damping_beta: f64,
+}
+
+impl Default for StripConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            length_mm: 40.0,
+            element_mm: 1.0,
+            youngs_modulus_pa: 3.46e6,
+            poisson: 0.49,
+            density_kg_m3: 1080.0,
+            order: 250,
+            boundary: "bonded".into(),
+            cutoff_hz: 2500.0,
+            damping_alpha: 60.0,
+            damping_beta: 3e-6,
+        }
+    }
+}
+
+/// Substrate bulge under the strip: a raised-cosine bump.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BulgeConfig {
+    pub height_mm: f64,
+    pub half_width_mm: f64,
+    pub center_mm: f64,
+}
+
+impl Default for BulgeConfig {
+    fn default() -> Self {
+        Self { height_mm: 0.2, half_width_mm: 10.0, center_mm: 20.0 }
+    }
+}
+
+/// Where the strip lies in the robot base frame (DESIGN section 3).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlacementConfig {
+    /// Base z of the table top (strip bottom), m.
+    pub table_z_m: f64,
+    /// Base x of the strip's start (task z = 0), m.
+    pub strip_start_x_m: f64,
+    /// Base y of the strip's centre line (task x = 0), m.
+    pub strip_y_m: f64,
+}
+
+impl Default for PlacementConfig {
+    fn default() -> Self {
+        Self { table_z_m: 0.70, strip_start_x_m: 0.88, strip_y_m: 0.0 }
+    }
+}
+
+/// Wheel–strip contact law (unilateral penalty with damping).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ContactConfig {
+    pub stiffness_n_per_m: f64,
+    pub damping_ns_per_m: f64,
+}
+
+impl Default for ContactConfig {
+    fn default() -> Self {
+        Self { stiffness_n_per_m: 1.0e6, damping_ns_per_m: 50.0 }
+    }
+}
+
+/// References (thesis Figure 6.6, plus approach and lift-off).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrajectoryConfig {
+    /// Start height of the wheel's lowest point above the undeformed strip top, mm.
+    pub approach_height_mm: f64,
+    /// Time to hold the start pose before moving, s.
+    pub settle_s: f64,
+    /// Approach speed towards the strip until contact is detected, mm/s.
+    pub approach_speed_mm_s: f64,
+    /// Contact detection threshold on |F|, N.
+    pub contact_threshold_n: f64,
+    /// Force set-point on the strip while rolling, N (negative = pressing, thesis sign).
+    pub force_ref_n: f64,
+    /// Force ramp time, s.
+    pub force_ramp_s: f64,
+    /// Dwell at full force before rolling, s.
+    pub dwell_s: f64,
+    pub z_start_mm: f64,
+    pub z_end_mm: f64,
+    /// Rolling time with the cosine velocity profile, s.
+    pub roll_s: f64,
+    /// Force ramp-down time after rolling, s.
+    pub ramp_down_s: f64,
+    /// Lift-off height above the strip after the ramp-down, mm.
+    pub lift_mm: f64,
+    pub lift_s: f64,
+}
+
+impl Default for TrajectoryConfig {
+    fn default() -> Self {
+        Self {
+            approach_height_mm: 3.0,
+            settle_s: 0.1,
+            approach_speed_mm_s: 10.0,
+            contact_threshold_n: 0.5,
+            force_ref_n: -10.0,
+            force_ramp_s: 0.3,
+            dwell_s: 0.2,
+            z_start_mm: 2.0,
+            z_end_mm: 38.0,
+            roll_s: 2.0,
+            ramp_down_s: 0.2,
+            lift_mm: 3.0,
+            lift_s: 0.3,
+        }
+    }
+}
+
+/// Controller gains. Zero for a force gain means "derive from the design rule" (issue 6).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControllerConfig {
+    /// Desired crossover of the force loop, Hz (Section 6.2: about 25 Hz).
+    pub force_crossover_hz: f64,
+    /// Integral action on the force error (the thesis has none).
+    pub force_integral: bool,
+    /// Integral gain relative to the crossover: ki = ratio * 2 pi f_c (1/s).
+    pub force_integral_ratio: f64,
+    /// Anti-windup clamp on the integral's contribution, N.
+    pub force_integral_limit_n: f64,
+    /// Translational PD bandwidth (other directions), Hz, and damping ratio.
+    pub motion_bandwidth_hz: f64,
+    pub motion_damping_ratio: f64,
+    /// Rotational PD bandwidth, Hz.
+    pub rotation_bandwidth_hz: f64,
+    /// Joint-space damping added in the null of nothing (small, for the wrist), N m s/rad.
+    pub joint_damping_nms: f64,
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        Self {
+            force_crossover_hz: 25.0,
+            force_integral: true,
+            force_integral_ratio: 0.2,
+            force_integral_limit_n: 5.0,
+            motion_bandwidth_hz: 10.0,
+            motion_damping_ratio: 1.0,
+            rotation_bandwidth_hz: 10.0,
+            joint_damping_nms: 0.0,
+        }
+    }
+}
+
+/// Recording.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecordingConfig {
+    pub enabled: bool,
+    /// Bounded queue between the loop thread and the writer thread, records.
+    pub queue_capacity: usize,
+    /// MCAP chunk size bound, bytes (a killed run loses at most the open chunk).
+    pub chunk_size_bytes: u64,
+}
+
+impl Default for RecordingConfig {
+    fn default() -> Self {
+        Self { enabled: true, queue_capacity: 8192, chunk_size_bytes: 512 * 1024 }
+    }
+}
+
+impl Scenario {
+    /// Parse a scenario from TOML text; `path` is only used in error messages.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, ScenarioError> {
+        let s: Scenario = toml::from_str(text).map_err(|e| {
+            let (line, column) = e
+                .span()
+                .map(|sp| line_col(text, sp.start))
+                .unwrap_or((0, 0));
+            ScenarioError::Parse {
+                path: path.to_path_buf(),
+                line,
+                column,
+                message: e.message().to_string(),
+            }
+        })?;
+        s.validate(path)?;
+        Ok(s)
+    }
+
+    /// Load and validate a scenario file.
+    pub fn load(path: &Path) -> Result<Self, ScenarioError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ScenarioError::Read { path: path.to_path_buf(), source })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// The default scenario, as shipped in `scenarios/default.toml`.
+    pub fn default_file() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("default.toml")
+    }
+
+    /// Range checks the type system cannot express.
+    pub fn validate(&self, path: &Path) -> Result<(), ScenarioError> {
+        let bad = |field: &'static str, value: f64, why: &'static str| ScenarioError::Invalid {
+            path: path.to_path_buf(),
+            field,
+            value: value.to_string(),
+            why,
+        };
+        let l = &self.loop_;
+        if !(l.period_s > 0.0 && l.period_s <= 0.1) {
+            return Err(bad("loop.period_s", l.period_s, "must be in (0, 0.1] s"));
+        }
+        if !(l.torque_budget_us > 0.0 && l.torque_budget_us < l.period_s * 1e6) {
+            return Err(bad("loop.torque_budget_us", l.torque_budget_us, "must be positive and shorter than the period"));
+        }
+        if l.max_consecutive_misses == 0 {
+            return Err(bad("loop.max_consecutive_misses", 0.0, "must be at least 1"));
+        }
+        if !(l.lockstep_watchdog_s > 0.0) {
+            return Err(bad("loop.lockstep_watchdog_s", l.lockstep_watchdog_s, "must be positive"));
+        }
+        if !(l.duration_s >= 0.0 && l.duration_s.is_finite()) {
+            return Err(bad("loop.duration_s", l.duration_s, "must be finite and >= 0"));
+        }
+        if l.substeps == 0 || l.substeps > 1000 {
+            return Err(bad("loop.substeps", l.substeps as f64, "must be in 1..=1000"));
+        }
+        if !(self.robot.plant_inertia_scale > 0.0) {
+            return Err(bad("robot.plant_inertia_scale", self.robot.plant_inertia_scale, "must be positive"));
+        }
+        if !(self.robot.tool_mass_kg >= 0.0) {
+            return Err(bad("robot.tool_mass_kg", self.robot.tool_mass_kg, "must be >= 0"));
+        }
+        let s = &self.strip;
+        if !(s.length_mm >= 4.0) {
+            return Err(bad("strip.length_mm", s.length_mm, "must be at least 4 mm"));
+        }
+        if !(s.element_mm > 0.0 && s.element_mm <= 4.0) {
+            return Err(bad("strip.element_mm", s.element_mm, "must be in (0, 4] mm"));
+        }
+        if !(s.poisson > 0.0 && s.poisson < 0.5) {
+            return Err(bad("strip.poisson", s.poisson, "must be in (0, 0.5)"));
+        }
+        if s.boundary != "bonded" && s.boundary != "sliding" {
+            return Err(ScenarioError::Invalid {
+                path: path.to_path_buf(),
+                field: "strip.boundary",
+                value: format!("{:?}", s.boundary),
+                why: "must be \"bonded\" or \"sliding\"",
+            });
+        }
+        let t = &self.trajectory;
+        if !(t.z_start_mm >= 0.0 && t.z_end_mm <= s.length_mm && t.z_start_mm < t.z_end_mm) {
+            return Err(bad("trajectory.z_end_mm", t.z_end_mm, "need 0 <= z_start_mm < z_end_mm <= strip.length_mm"));
+        }
+        if !(t.roll_s > 0.0) {
+            return Err(bad("trajectory.roll_s", t.roll_s, "must be positive"));
+        }
+        if !(self.recording.queue_capacity >= 16) {
+            return Err(bad("recording.queue_capacity", self.recording.queue_capacity as f64, "must be at least 16"));
+        }
+        Ok(())
+    }
+}
+
+fn line_col(text: &str, byte: usize) -> (usize, usize) {
+    let before = &text[..byte.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rfind('\n').map(|i| before.len() - i).unwrap_or(before.len() + 1);
+    (line, column)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_scenarios_parse() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut n = 0;
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "toml") && p.file_name().unwrap() != "Cargo.toml" {
+                Scenario::load(&p).unwrap_or_else(|e| panic!("{e}"));
+                n += 1;
+            }
+        }
+        assert!(n >= 1, "no scenario files found");
+    }
+
+    #[test]
+    fn default_file_equals_built_in_defaults_where_it_is_silent() {
+        let s = Scenario::load(&Scenario::default_file()).unwrap();
+        assert_eq!(s.loop_.period_s, 1e-3);
+        assert_eq!(s.trajectory.force_ref_n, -10.0);
+        assert_eq!(s.bulge, BulgeConfig::default());
+    }
+
+    #[test]
+    fn unknown_field_names_file_line_and_field() {
+        let text = "[loop]\nperiod_s = 0.001\nbudget_typo = 3\n";
+        let e = Scenario::from_toml_str(text, Path::new("x/bad.toml")).unwrap_err().to_string();
+        assert!(e.contains("x/bad.toml"), "{e}");
+        assert!(e.contains("line 3"), "{e}");
+        assert!(e.contains("budget_typo"), "{e}");
+    }
+
+    #[test]
+    fn wrong_type_names_line() {
+        let text = "[trajectory]\nroll_s = \"fast\"\n";
+        let e = Scenario::from_toml_str(text, Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("line 2"), "{e}");
+    }
+
+    #[test]
+    fn out_of_range_value_names_field_and_value() {
+        let text = "[loop]\ntorque_budget_us = 5000\n";
+        let e = Scenario::from_toml_str(text, Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("loop.torque_budget_us") && e.contains("5000"), "{e}");
+        let text = "[strip]\nboundary = \"glued\"\n";
+        let e = Scenario::from_toml_str(text, Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("strip.boundary") && e.contains("glued"), "{e}");
+    }
+}

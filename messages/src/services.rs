@@ -1,0 +1,44 @@
+//! Service names. Every name carries a rig prefix so several rigs (and parallel tests) share a host
+//! without seeing each other: `<rig>/joint_state`, `<rig>/wrench`, ...
+
+/// Publish-subscribe: [`crate::JointState`], plant → controller.
+pub const JOINT_STATE: &str = "joint_state";
+/// Publish-subscribe: [`crate::Wrench`], plant → controller.
+pub const WRENCH: &str = "wrench";
+/// Publish-subscribe: [`crate::JointTorque`], controller → plant.
+pub const JOINT_TORQUE: &str = "joint_torque";
+/// Publish-subscribe: [`crate::ControllerDiagnostics`], controller → plant (optional for a controller).
+pub const CONTROLLER_DIAGNOSTICS: &str = "controller_diagnostics";
+/// Event: the plant notifies after publishing state and wrench of a tick.
+pub const STATE_READY: &str = "state_ready";
+/// Event: the controller notifies after publishing the torque of a tick.
+pub const TORQUE_READY: &str = "torque_ready";
+
+/// Characters allowed in a rig name (it becomes part of shared-memory file names).
+pub fn validate_rig_name(rig: &str) -> Result<(), String> {
+    if rig.is_empty() || rig.len() > 64 {
+        return Err(format!("rig name {rig:?} must be 1..=64 characters"));
+    }
+    if !rig.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.') {
+        return Err(format!("rig name {rig:?} may only contain ASCII letters, digits, '_', '-' and '.'"));
+    }
+    Ok(())
+}
+
+/// Full iceoryx2 service name `<rig>/<service>`.
+pub fn service_name(rig: &str, service: &str) -> String {
+    format!("rig/{rig}/{service}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    #[test]
+    fn names_carry_the_rig_prefix() {
+        assert_eq!(service_name("a1", JOINT_STATE), "rig/a1/joint_state");
+        assert_ne!(service_name("a1", WRENCH), service_name("a2", WRENCH));
+        assert!(validate_rig_name("test-17_x").is_ok());
+        assert!(validate_rig_name("bad/name").is_err());
+        assert!(validate_rig_name("").is_err());
+    }
+}
