@@ -1,0 +1,419 @@
+//! The two ends of a rig's services, opened with the QoS of [`crate::qos`].
+//!
+//! [`PlantPorts`] is what the plant (or the replay tool acting as a plant) opens;
+//! [`ControllerPorts`] is what a controller opens. Both wake on an iceoryx2 event whose listener
+//! file descriptor is waited on with `ppoll` against an absolute deadline: iceoryx2's own timed
+//! waits resolve only whole milliseconds on this platform, too coarse for a 500 µs torque budget.
+//!
+//! Everything after `open` is allocation-free and lock-free (`ipc::Service` ports are
+//! single-threaded), so these calls may sit on the 1 kHz path.
+
+use crate::{qos, services, ControllerDiagnostics, JointState, JointTorque, Wrench};
+use iceoryx2::prelude::*;
+use std::time::{Duration, Instant};
+
+type Pub<T> = iceoryx2::port::publisher::Publisher<ipc::Service, T, ()>;
+type Sub<T> = iceoryx2::port::subscriber::Subscriber<ipc::Service, T, ()>;
+type Notifier = iceoryx2::port::notifier::Notifier<ipc::Service>;
+type Listener = iceoryx2::port::listener::Listener<ipc::Service>;
+
+/// Failure to open or use a rig's services. The message names the rig and service.
+#[derive(Debug)]
+pub struct PortError(pub String);
+
+impl std::fmt::Display for PortError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+impl std::error::Error for PortError {}
+
+fn err(rig: &str, what: &str, e: impl std::fmt::Debug) -> PortError {
+    PortError(format!("rig {rig:?}: {what}: {e:?}"))
+}
+
+/// Remove the shared-memory resources of iceoryx2 nodes whose process died (a killed plant or
+/// controller leaves them behind). Returns how many dead nodes were cleaned.
+pub fn clean_dead_nodes() -> usize {
+    let mut cleaned = 0;
+    let _ = Node::<ipc::Service>::list(Config::global_config(), |state| {
+        if let NodeState::<ipc::Service>::Dead(view) = state {
+            if view.try_remove_stale_resources().is_ok() {
+                cleaned += 1;
+            }
+        }
+        CallbackProgression::Continue
+    });
+    cleaned
+}
+
+fn node(rig: &str, role: &str) -> Result<Node<ipc::Service>, PortError> {
+    let name = format!("{role}/{rig}");
+    let name: NodeName = name.as_str().try_into().map_err(|e| err(rig, "node name", e))?;
+    // Our daemons handle SIGINT/SIGTERM themselves (finalise the recording, say goodbye).
+    NodeBuilder::new()
+        .name(&name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| err(rig, "create iceoryx2 node", e))
+}
+
+fn service_name(rig: &str, svc: &str) -> Result<ServiceName, PortError> {
+    services::validate_rig_name(rig).map_err(PortError)?;
+    services::service_name(rig, svc)
+        .as_str()
+        .try_into()
+        .map_err(|e| err(rig, svc, e))
+}
+
+macro_rules! pubsub {
+    ($node:expr, $rig:expr, $svc:expr, $ty:ty) => {
+        $node
+            .service_builder(&service_name($rig, $svc)?)
+            .publish_subscribe::<$ty>()
+            .max_publishers(qos::MAX_PUBLISHERS)
+            .max_subscribers(qos::MAX_SUBSCRIBERS)
+            .max_nodes(qos::MAX_NODES)
+            .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
+            .subscriber_max_borrowed_samples(qos::MAX_BORROWED_SAMPLES)
+            .history_size(qos::HISTORY)
+            .enable_safe_overflow(qos::SAFE_OVERFLOW)
+            .open_or_create()
+            .map_err(|e| err($rig, concat!("open service ", stringify!($ty)), e))?
+    };
+}
+
+fn event(
+    node: &Node<ipc::Service>,
+    rig: &str,
+    svc: &str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, PortError> {
+    node.service_builder(&service_name(rig, svc)?)
+        .event()
+        .max_notifiers(qos::MAX_NOTIFIERS)
+        .max_listeners(qos::MAX_LISTENERS)
+        .max_nodes(qos::MAX_NODES)
+        .open_or_create()
+        .map_err(|e| err(rig, svc, e))
+}
+
+fn publisher<T: core::fmt::Debug + ZeroCopySend + Copy>(
+    f: &iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+    rig: &str,
+) -> Result<Pub<T>, PortError> {
+    f.publisher_builder().create().map_err(|e| err(rig, "create publisher", e))
+}
+
+fn subscriber<T: core::fmt::Debug + ZeroCopySend + Copy>(
+    f: &iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+    rig: &str,
+) -> Result<Sub<T>, PortError> {
+    f.subscriber_builder()
+        .buffer_size(qos::SUBSCRIBER_BUFFER)
+        .create()
+        .map_err(|e| err(rig, "create subscriber", e))
+}
+
+/// Drain a subscriber and keep the newest sample (older ones are stale by construction).
+fn newest<T: core::fmt::Debug + ZeroCopySend + Copy>(sub: &Sub<T>) -> Option<T> {
+    let mut last = None;
+    while let Ok(Some(s)) = sub.receive() {
+        last = Some(*s);
+    }
+    last
+}
+
+/// Drain a subscriber, keeping the newest sample whose `tick` satisfies `want`.
+fn newest_matching<T: core::fmt::Debug + ZeroCopySend + Copy>(
+    sub: &Sub<T>,
+    mut want: impl FnMut(&T) -> bool,
+) -> Option<T> {
+    let mut last = None;
+    while let Ok(Some(s)) = sub.receive() {
+        if want(&s) {
+            last = Some(*s);
+        }
+    }
+    last
+}
+
+/// Wait until `fd` is readable or the absolute `deadline` passes (monotonic clock, ns precision).
+/// Returns true if readable. EINTR restarts the wait with the remaining time.
+pub fn wait_readable(fd: i32, deadline: Instant) -> bool {
+    loop {
+        let now = Instant::now();
+        if now >= deadline {
+            // One last non-blocking check so an event that arrived exactly at the deadline counts.
+            return poll_once(fd, Duration::ZERO);
+        }
+        let rem = deadline - now;
+        let mut pfd = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };
+        let ts = libc::timespec { tv_sec: rem.as_secs() as libc::time_t, tv_nsec: rem.subsec_nanos() as libc::c_long };
+        // SAFETY: one valid pollfd, valid timespec, no signal mask change.
+        let r = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+        if r > 0 {
+            return true;
+        }
+        if r == 0 {
+            continue; // timed out: the loop head re-checks the deadline
+        }
+        if std::io::Error::last_os_error().raw_os_error() != Some(libc::EINTR) {
+            return false;
+        }
+    }
+}
+
+fn poll_once(fd: i32, d: Duration) -> bool {
+    let mut pfd = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };
+    let ts = libc::timespec { tv_sec: d.as_secs() as libc::time_t, tv_nsec: d.subsec_nanos() as libc::c_long };
+    // SAFETY: as above.
+    unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) > 0 }
+}
+
+fn listener_fd(l: &Listener) -> i32 {
+    use iceoryx2_bb_posix::file_descriptor::FileDescriptorBased;
+    // SAFETY: the fd lives as long as the listener, which outlives every use through `self`.
+    unsafe { l.file_descriptor().native_handle() }
+}
+
+/// Outcome of waiting for the peer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// The peer notified (new data may be there).
+    Notified,
+    /// The deadline passed without a notification.
+    Timeout,
+}
+
+/// The plant's end: publishes state and wrench, receives torques and diagnostics.
+pub struct PlantPorts {
+    rig: String,
+    state_pub: Pub<JointState>,
+    wrench_pub: Pub<Wrench>,
+    torque_sub: Sub<JointTorque>,
+    diag_sub: Sub<ControllerDiagnostics>,
+    state_ready: Notifier,
+    torque_ready: Listener,
+    torque_fd: i32,
+    // Services and node last: ports must drop before them.
+    _services: Box<dyn core::any::Any>,
+    _node: Node<ipc::Service>,
+}
+
+impl PlantPorts {
+    /// Open (or create) every service of rig `rig` as the plant. `role` names the node
+    /// (e.g. "plant-sim" or "replay").
+    pub fn open(rig: &str, role: &str) -> Result<Self, PortError> {
+        let node = node(rig, role)?;
+        let s_state = pubsub!(node, rig, services::JOINT_STATE, JointState);
+        let s_wrench = pubsub!(node, rig, services::WRENCH, Wrench);
+        let s_torque = pubsub!(node, rig, services::JOINT_TORQUE, JointTorque);
+        let s_diag = pubsub!(node, rig, services::CONTROLLER_DIAGNOSTICS, ControllerDiagnostics);
+        let e_state = event(&node, rig, services::STATE_READY)?;
+        let e_torque = event(&node, rig, services::TORQUE_READY)?;
+        let torque_ready = e_torque.listener_builder().create().map_err(|e| err(rig, "create listener", e))?;
+        let torque_fd = listener_fd(&torque_ready);
+        Ok(Self {
+            rig: rig.to_string(),
+            state_pub: publisher(&s_state, rig)?,
+            wrench_pub: publisher(&s_wrench, rig)?,
+            torque_sub: subscriber(&s_torque, rig)?,
+            diag_sub: subscriber(&s_diag, rig)?,
+            state_ready: e_state.notifier_builder().create().map_err(|e| err(rig, "create notifier", e))?,
+            torque_ready,
+            torque_fd,
+            _services: Box::new((s_state, s_wrench, s_torque, s_diag, e_state, e_torque)),
+            _node: node,
+        })
+    }
+
+    pub fn rig(&self) -> &str {
+        &self.rig
+    }
+
+    /// Publish state and wrench of one tick, then wake the controller.
+    pub fn publish(&self, state: &JointState, wrench: &Wrench) -> Result<(), PortError> {
+        self.state_pub.send_copy(*state).map_err(|e| err(&self.rig, "send joint state", e))?;
+        self.wrench_pub.send_copy(*wrench).map_err(|e| err(&self.rig, "send wrench", e))?;
+        self.state_ready.notify().map_err(|e| err(&self.rig, "notify state_ready", e))?;
+        Ok(())
+    }
+
+    /// Wait for the controller's notification until the absolute `deadline`; consumes it.
+    pub fn wait_torque(&self, deadline: Instant) -> Wake {
+        if wait_readable(self.torque_fd, deadline) {
+            let _ = self.torque_ready.try_wait(|_| {});
+            Wake::Notified
+        } else {
+            Wake::Timeout
+        }
+    }
+
+    /// Newest torque whose `tick` equals `tick` (older answers are discarded).
+    pub fn receive_torque_for(&self, tick: u64) -> Option<JointTorque> {
+        newest_matching(&self.torque_sub, |t| t.tick == tick)
+    }
+
+    /// Newest torque of any tick (late answers included): for diagnostics and version checks.
+    pub fn receive_torque_any(&self) -> Option<JointTorque> {
+        newest(&self.torque_sub)
+    }
+
+    /// Newest controller diagnostics, if the controller publishes any.
+    pub fn receive_diagnostics(&self) -> Option<ControllerDiagnostics> {
+        newest(&self.diag_sub)
+    }
+}
+
+/// The controller's end: receives state and wrench, publishes torques and diagnostics.
+pub struct ControllerPorts {
+    rig: String,
+    state_sub: Sub<JointState>,
+    wrench_sub: Sub<Wrench>,
+    torque_pub: Pub<JointTorque>,
+    diag_pub: Pub<ControllerDiagnostics>,
+    torque_ready: Notifier,
+    state_ready: Listener,
+    state_fd: i32,
+    _services: Box<dyn core::any::Any>,
+    _node: Node<ipc::Service>,
+}
+
+impl ControllerPorts {
+    /// Open (or create) every service of rig `rig` as a controller.
+    pub fn open(rig: &str, role: &str) -> Result<Self, PortError> {
+        let node = node(rig, role)?;
+        let s_state = pubsub!(node, rig, services::JOINT_STATE, JointState);
+        let s_wrench = pubsub!(node, rig, services::WRENCH, Wrench);
+        let s_torque = pubsub!(node, rig, services::JOINT_TORQUE, JointTorque);
+        let s_diag = pubsub!(node, rig, services::CONTROLLER_DIAGNOSTICS, ControllerDiagnostics);
+        let e_state = event(&node, rig, services::STATE_READY)?;
+        let e_torque = event(&node, rig, services::TORQUE_READY)?;
+        let state_ready = e_state.listener_builder().create().map_err(|e| err(rig, "create listener", e))?;
+        let state_fd = listener_fd(&state_ready);
+        Ok(Self {
+            rig: rig.to_string(),
+            state_sub: subscriber(&s_state, rig)?,
+            wrench_sub: subscriber(&s_wrench, rig)?,
+            torque_pub: publisher(&s_torque, rig)?,
+            diag_pub: publisher(&s_diag, rig)?,
+            torque_ready: e_torque.notifier_builder().create().map_err(|e| err(rig, "create notifier", e))?,
+            state_ready,
+            state_fd,
+            _services: Box::new((s_state, s_wrench, s_torque, s_diag, e_state, e_torque)),
+            _node: node,
+        })
+    }
+
+    pub fn rig(&self) -> &str {
+        &self.rig
+    }
+
+    /// Wait for the plant's notification until the absolute `deadline`; consumes it.
+    pub fn wait_state(&self, deadline: Instant) -> Wake {
+        if wait_readable(self.state_fd, deadline) {
+            let _ = self.state_ready.try_wait(|_| {});
+            Wake::Notified
+        } else {
+            Wake::Timeout
+        }
+    }
+
+    /// Newest joint state (older ones are stale).
+    pub fn receive_state(&self) -> Option<JointState> {
+        newest(&self.state_sub)
+    }
+
+    /// Newest wrench whose tick equals `tick`, else the newest of any tick.
+    pub fn receive_wrench(&self) -> Option<Wrench> {
+        newest(&self.wrench_sub)
+    }
+
+    /// Publish the torque of one tick (and optional diagnostics), then wake the plant.
+    pub fn publish(&self, torque: &JointTorque, diag: Option<&ControllerDiagnostics>) -> Result<(), PortError> {
+        self.torque_pub.send_copy(*torque).map_err(|e| err(&self.rig, "send joint torque", e))?;
+        if let Some(d) = diag {
+            self.diag_pub.send_copy(*d).map_err(|e| err(&self.rig, "send diagnostics", e))?;
+        }
+        self.torque_ready.notify().map_err(|e| err(&self.rig, "notify torque_ready", e))?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::CONTRACT_VERSION;
+
+    fn unique_rig(tag: &str) -> String {
+        let n = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos();
+        format!("t-{tag}-{}-{}", std::process::id(), n % 1_000_000_000)
+    }
+
+    fn state(tick: u64) -> JointState {
+        JointState {
+            contract_version: CONTRACT_VERSION,
+            plant_status: 1,
+            tick,
+            sim_time_s: tick as f64 * 1e-3,
+            q: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
+            qd: [0.0; 6],
+            tau_applied: [0.0; 6],
+            period_s: 1e-3,
+            flags: 0,
+            consecutive_misses: 0,
+            total_misses: 0,
+        }
+    }
+
+    #[test]
+    fn round_trip_between_plant_and_controller_ports() {
+        let rig = unique_rig("rt");
+        let plant = PlantPorts::open(&rig, "test-plant").unwrap();
+        let ctrl = ControllerPorts::open(&rig, "test-controller").unwrap();
+        let w = Wrench { contract_version: CONTRACT_VERSION, frame: 0, tick: 5, force: [1.0, 2.0, 3.0], torque: [0.0; 3] };
+        plant.publish(&state(5), &w).unwrap();
+        assert_eq!(ctrl.wait_state(Instant::now() + Duration::from_secs(1)), Wake::Notified);
+        let s = ctrl.receive_state().unwrap();
+        assert_eq!(s.tick, 5);
+        assert_eq!(s.q, state(5).q);
+        assert_eq!(ctrl.receive_wrench().unwrap().force, [1.0, 2.0, 3.0]);
+        let t = JointTorque { contract_version: CONTRACT_VERSION, controller_status: 0, tick: 5, controller_id: 9, tau: [1.0; 6] };
+        ctrl.publish(&t, None).unwrap();
+        assert_eq!(plant.wait_torque(Instant::now() + Duration::from_secs(1)), Wake::Notified);
+        assert_eq!(plant.receive_torque_for(5).unwrap().controller_id, 9);
+    }
+
+    #[test]
+    fn wait_times_out_at_a_sub_millisecond_deadline() {
+        let rig = unique_rig("to");
+        let plant = PlantPorts::open(&rig, "test-plant").unwrap();
+        let t0 = Instant::now();
+        assert_eq!(plant.wait_torque(t0 + Duration::from_micros(300)), Wake::Timeout);
+        // Correctness, not timing: the wait must not return before its deadline.
+        assert!(t0.elapsed() >= Duration::from_micros(300));
+    }
+
+    #[test]
+    fn stale_answers_are_not_taken_for_the_current_tick() {
+        let rig = unique_rig("st");
+        let plant = PlantPorts::open(&rig, "test-plant").unwrap();
+        let ctrl = ControllerPorts::open(&rig, "test-controller").unwrap();
+        let mut t = JointTorque { contract_version: CONTRACT_VERSION, controller_status: 0, tick: 3, controller_id: 1, tau: [0.0; 6] };
+        ctrl.publish(&t, None).unwrap();
+        t.tick = 4;
+        ctrl.publish(&t, None).unwrap();
+        assert!(plant.receive_torque_for(5).is_none());
+    }
+
+    #[test]
+    fn two_rigs_do_not_see_each_other() {
+        let (a, b) = (unique_rig("a"), unique_rig("b"));
+        let pa = PlantPorts::open(&a, "test-plant").unwrap();
+        let cb = ControllerPorts::open(&b, "test-controller").unwrap();
+        let w = Wrench { contract_version: CONTRACT_VERSION, frame: 0, tick: 1, force: [0.0; 3], torque: [0.0; 3] };
+        pa.publish(&state(1), &w).unwrap();
+        assert_eq!(cb.wait_state(Instant::now() + Duration::from_millis(20)), Wake::Timeout);
+        assert!(cb.receive_state().is_none());
+    }
+}
