@@ -2,8 +2,6 @@
 //! the caller as `J^T F_e`): recursive Newton-Euler, composite rigid body algorithm, forward
 //! dynamics by CRBA + Cholesky. Spatial quantities in base axes about the base origin.
 
-use nalgebra::Cholesky;
-
 use crate::kinematics::Frames;
 use crate::model::Robot;
 use crate::spatial::{cross_force, SpatialInertia, V3};
@@ -13,7 +11,11 @@ impl Robot {
     /// Spatial inertias of the six bodies (link 6 with the tool) about the base origin.
     #[inline(always)]
     fn body_inertias(&self, frames: &Frames) -> [SpatialInertia; 6] {
-        std::array::from_fn(|i| self.bodies[i].in_base(&frames.rot[i + 1], &frames.pos[i + 1]))
+        let mut out = [SpatialInertia::default(); 6];
+        for (i, body) in self.bodies.iter().enumerate() {
+            out[i] = body.in_base(&frames.rot[i + 1], &frames.pos[i + 1]);
+        }
+        out
     }
 
     /// Recursive Newton-Euler core: rigid-body torques for `(qd, qdd)` with the base accelerating
@@ -128,11 +130,7 @@ impl Robot {
     /// inertias, which Cholesky in f64 handles to ~1e-10 relative).
     pub fn forward_dynamics(&self, q: &Vec6, qd: &Vec6, tau: &Vec6) -> Vec6 {
         let (m, bias) = self.mass_matrix_and_bias(q, qd);
-        let rhs = tau - bias;
-        match Cholesky::new_unchecked(m).solve(&rhs) {
-            sol if sol.iter().all(|x| x.is_finite()) => sol,
-            _ => Vec6::from_element(f64::NAN),
-        }
+        cholesky_solve(m, tau - bias)
     }
 
     /// Kinetic energy `qd^T M qd / 2` (J), armature included.
@@ -151,4 +149,46 @@ impl Robot {
             })
             .sum()
     }
+}
+
+/// Solve `M x = b` for symmetric positive definite `M` by an unrolled Cholesky factorisation
+/// (`M = L L^T`); NaN if `M` is not positive definite.
+#[inline(always)]
+pub fn cholesky_solve(m: Mat6, b: Vec6) -> Vec6 {
+    let mut l = m;
+    for j in 0..6 {
+        let mut d = l[(j, j)];
+        for k in 0..j {
+            d -= l[(j, k)] * l[(j, k)];
+        }
+        if !(d > 0.0) {
+            return Vec6::from_element(f64::NAN);
+        }
+        let d = d.sqrt();
+        l[(j, j)] = d;
+        let inv = 1.0 / d;
+        for i in (j + 1)..6 {
+            let mut v = l[(i, j)];
+            for k in 0..j {
+                v -= l[(i, k)] * l[(j, k)];
+            }
+            l[(i, j)] = v * inv;
+        }
+    }
+    let mut x = b;
+    for i in 0..6 {
+        let mut v = x[i];
+        for k in 0..i {
+            v -= l[(i, k)] * x[k];
+        }
+        x[i] = v / l[(i, i)];
+    }
+    for i in (0..6).rev() {
+        let mut v = x[i];
+        for k in (i + 1)..6 {
+            v -= l[(k, i)] * x[k];
+        }
+        x[i] = v / l[(i, i)];
+    }
+    x
 }

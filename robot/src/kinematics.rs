@@ -35,7 +35,7 @@ pub(crate) fn to_isometry(rot: &M3, pos: &V3) -> Isometry3<f64> {
 
 impl Robot {
     /// Forward kinematics of every link frame (thesis Table 7.1, `A_i = Rz Tz Tx Rx`).
-    #[inline]
+    #[inline(always)]
     pub fn frames(&self, q: &Vec6) -> Frames {
         let mut rot = [M3::identity(); 7];
         let mut pos = [V3::zeros(); 7];
@@ -43,15 +43,15 @@ impl Robot {
             let dh = &self.dh[i];
             let (st, ct) = q[i].sin_cos();
             let (ca, sa) = (dh.cos_alpha, dh.sin_alpha);
-            #[rustfmt::skip]
-            let local = M3::new(
-                ct, -st * ca,  st * sa,
-                st,  ct * ca, -ct * sa,
-                0.0,      sa,       ca,
-            );
-            let offset = V3::new(dh.a * ct, dh.a * st, dh.d);
-            pos[i + 1] = pos[i] + rot[i] * offset;
-            rot[i + 1] = rot[i] * local;
+            // R_i = R_{i-1} Rz(q_i) Rx(alpha_i), by columns; origin moves by R_{i-1} (a c, a s, d).
+            let prev = &rot[i];
+            let (x, y, z) = (prev.column(0), prev.column(1), prev.column(2));
+            let x_new = x * ct + y * st;
+            let y_rz = y * ct - x * st;
+            pos[i + 1] = pos[i] + x_new * dh.a + z * dh.d;
+            let y_new = y_rz * ca + z * sa;
+            let z_new = z * ca - y_rz * sa;
+            rot[i + 1] = M3::from_columns(&[x_new, y_new, z_new]);
         }
         Frames { rot, pos }
     }

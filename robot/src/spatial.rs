@@ -26,9 +26,22 @@ impl BodyInertia {
     #[inline(always)]
     pub fn in_base(&self, rot: &M3, pos: &V3) -> SpatialInertia {
         let c = pos + rot * self.com;
-        let ic = rot * self.inertia_com * rot.transpose();
         let m = self.mass;
-        SpatialInertia { m, h: c * m, i: ic + (M3::from_diagonal_element(c.norm_squared()) - c * c.transpose()) * m }
+        // R I R^T + m (|c|^2 E - c c^T), symmetric: build the upper triangle only.
+        let a = rot * self.inertia_com;
+        let mut i = M3::zeros();
+        let cc = c.norm_squared();
+        for col in 0..3 {
+            for row in 0..=col {
+                let mut v = a.row(row).dot(&rot.row(col)) - m * c[row] * c[col];
+                if row == col {
+                    v += m * cc;
+                }
+                i[(row, col)] = v;
+                i[(col, row)] = v;
+            }
+        }
+        SpatialInertia { m, h: c * m, i }
     }
 }
 
