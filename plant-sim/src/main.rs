@@ -1,1 +1,56 @@
-fn main() {}
+//! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR]`
+//!
+//! Runs the plant daemon; at exit prints one line of JSON with the run's summary on stdout.
+
+use std::path::PathBuf;
+
+use clap::Parser;
+use scenario::Mode;
+
+#[derive(Debug, Parser)]
+#[command(name = "plant-sim", about = "Plant daemon of the weatherstrip rig: robot (+ strip) simulation, the 1 kHz clock master")]
+struct Args {
+    /// Rig name: the prefix of every iceoryx2 service (the controller must use the same).
+    #[arg(long)]
+    rig: String,
+    /// Scenario TOML file.
+    #[arg(long)]
+    scenario: PathBuf,
+    /// Override the scenario's loop mode.
+    #[arg(long)]
+    mode: Option<Mode>,
+    /// Simulated seconds to run (default: scenario's loop.duration_s, else the trajectory's length).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// MCAP recording path (default runs/<time>-<rig>/run.mcap).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Cache directory for reduced strip models.
+    #[arg(long, default_value = "target/strip-cache")]
+    cache_dir: PathBuf,
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .init();
+    let a = Args::parse();
+    let opts = plant_sim::run::RunOptions {
+        rig: a.rig.clone(),
+        scenario_path: a.scenario,
+        mode: a.mode,
+        duration_s: a.duration,
+        out: a.out,
+        cache_dir: a.cache_dir,
+    };
+    match plant_sim::run::run(&opts) {
+        Ok(summary) => {
+            println!("{}", summary.to_json(&a.rig));
+        }
+        Err(e) => {
+            eprintln!("plant-sim: error: {e:#}");
+            std::process::exit(1);
+        }
+    }
+}

@@ -1,0 +1,358 @@
+//! The torque gate: decides, every tick, which joint torque the plant applies (DESIGN section 6).
+//!
+//! - A fresh, valid torque for this tick is applied (blended in after a takeover, see below).
+//! - A late, missing or refused torque is a *miss*: the last applied torque is held and counted.
+//! - `max_consecutive_misses` misses in a row: safe stop, `τ = g(q) − D q̇` (gravity compensation
+//!   plus joint damping), until a valid torque arrives again.
+//! - Takeover without a torque jump: when a torque arrives from a new `controller_id`, or the first
+//!   one after the safe stop or after start-up, the applied torque moves linearly from what the
+//!   plant would otherwise apply (held torque or safe-stop torque) to the controller's over
+//!   `takeover_blend_s`.
+//! - Refusal: another contract version, NaN/infinite entries or entries beyond the joint torque
+//!   limits make the torque a miss, reported with the reason.
+//!
+//! Pure logic, allocation-free, so it is unit-tested without processes.
+
+use messages::{check_version, ControllerStatus, JointTorque, PlantStatus, VersionMismatch, CONTRACT_VERSION};
+use robot::Vec6;
+
+/// Why a torque was refused.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Refusal {
+    Version(VersionMismatch),
+    NotFinite { joint: usize },
+    OutOfLimit { joint: usize, value_nm: f64, limit_nm: f64 },
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Refusal::Version(v) => write!(f, "torque refused: {v}"),
+            Refusal::NotFinite { joint } => write!(f, "torque refused: joint {} torque is not finite", joint + 1),
+            Refusal::OutOfLimit { joint, value_nm, limit_nm } => write!(
+                f,
+                "torque refused: joint {} torque {value_nm:.1} N m exceeds the limit {limit_nm:.1} N m",
+                joint + 1
+            ),
+        }
+    }
+}
+
+/// Check a torque message against the contract and the joint torque limits.
+pub fn validate(t: &JointTorque, limit_nm: &[f64; 6]) -> Result<Vec6, Refusal> {
+    check_version(CONTRACT_VERSION, t.contract_version, "joint torque").map_err(Refusal::Version)?;
+    for (joint, (&v, &lim)) in t.tau.iter().zip(limit_nm.iter()).enumerate() {
+        if !v.is_finite() {
+            return Err(Refusal::NotFinite { joint });
+        }
+        if v.abs() > lim {
+            return Err(Refusal::OutOfLimit { joint, value_nm: v, limit_nm: lim });
+        }
+    }
+    Ok(Vec6::from(t.tau))
+}
+
+/// Gate parameters (from the scenario's `[loop]`).
+#[derive(Debug, Clone, Copy)]
+pub struct GateConfig {
+    pub max_consecutive_misses: u32,
+    /// Ticks over which a takeover is blended (0 = switch at once).
+    pub blend_ticks: u32,
+    pub safe_stop_damping_nms: f64,
+    pub torque_limit_nm: [f64; 6],
+}
+
+/// Rare events of one tick, for the recording and the log.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GateEvents {
+    /// First miss after a good tick.
+    pub miss_streak_started: bool,
+    pub safe_stop_entered: bool,
+    pub safe_stop_cleared: bool,
+    /// A controller took over: `(previous id or None at the first controller, new id)`.
+    pub controller_change: Option<(Option<u64>, u64)>,
+    /// The controller reported a fault of its own.
+    pub controller_fault: bool,
+}
+
+/// What the plant applies over this tick.
+#[derive(Debug, Clone, Copy)]
+pub struct Decision {
+    pub tau: Vec6,
+    /// The torque was held or replaced (not this tick's fresh controller torque).
+    pub held: bool,
+    /// This tick counted as a miss.
+    pub missed: bool,
+    pub refused: Option<Refusal>,
+    pub events: GateEvents,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum BlendFrom {
+    Held(Vec6),
+    SafeStop,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Blend {
+    from: BlendFrom,
+    done_ticks: u32,
+}
+
+/// Gate state across ticks.
+#[derive(Debug, Clone)]
+pub struct Gate {
+    cfg: GateConfig,
+    status: PlantStatus,
+    last_applied: Vec6,
+    consecutive_misses: u32,
+    total_misses: u64,
+    safe_stops: u64,
+    refusals: u64,
+    controller_id: Option<u64>,
+    blend: Option<Blend>,
+}
+
+impl Gate {
+    pub fn new(cfg: GateConfig) -> Gate {
+        Gate {
+            cfg,
+            status: PlantStatus::WaitingForController,
+            last_applied: Vec6::zeros(),
+            consecutive_misses: 0,
+            total_misses: 0,
+            safe_stops: 0,
+            refusals: 0,
+            controller_id: None,
+            blend: None,
+        }
+    }
+
+    /// Status to publish with the next state (it describes the torque applied over the last tick).
+    pub fn status(&self) -> PlantStatus {
+        self.status
+    }
+    pub fn consecutive_misses(&self) -> u32 {
+        self.consecutive_misses
+    }
+    pub fn total_misses(&self) -> u64 {
+        self.total_misses
+    }
+    pub fn safe_stops(&self) -> u64 {
+        self.safe_stops
+    }
+    pub fn refusals(&self) -> u64 {
+        self.refusals
+    }
+    pub fn controller_id(&self) -> Option<u64> {
+        self.controller_id
+    }
+    /// Torque applied over the last tick.
+    pub fn last_applied(&self) -> Vec6 {
+        self.last_applied
+    }
+
+    fn safe_stop_torque(&self, gravity: &Vec6, qd: &Vec6) -> Vec6 {
+        gravity - qd * self.cfg.safe_stop_damping_nms
+    }
+
+    /// Decide the torque of one tick. `torque` is this tick's answer (None if none arrived in
+    /// time); `gravity` = g(q) and `qd` are the plant's, for the safe stop.
+    pub fn decide(&mut self, torque: Option<&JointTorque>, gravity: &Vec6, qd: &Vec6) -> Decision {
+        let mut events = GateEvents::default();
+        let verdict = torque.map(|t| (t, validate(t, &self.cfg.torque_limit_nm)));
+        let refused = match verdict {
+            Some((_, Err(r))) => Some(r),
+            _ => None,
+        };
+        if let Some((t, Ok(tau))) = verdict {
+            if t.controller_status == ControllerStatus::Fault as u32 {
+                // The controller asks for the safe stop; it is not a miss.
+                events.controller_fault = true;
+                if self.status != PlantStatus::SafeStop {
+                    events.safe_stop_entered = true;
+                    self.safe_stops += 1;
+                }
+                self.status = PlantStatus::SafeStop;
+                self.consecutive_misses = 0;
+                self.blend = None;
+                let tau = self.safe_stop_torque(gravity, qd);
+                self.last_applied = tau;
+                return Decision { tau, held: true, missed: false, refused: None, events };
+            }
+            let new_controller = self.controller_id != Some(t.controller_id);
+            if new_controller {
+                events.controller_change = Some((self.controller_id, t.controller_id));
+                self.controller_id = Some(t.controller_id);
+            }
+            let from = match self.status {
+                PlantStatus::WaitingForController | PlantStatus::SafeStop => Some(BlendFrom::SafeStop),
+                _ if new_controller => Some(BlendFrom::Held(self.last_applied)),
+                _ => None,
+            };
+            if self.status == PlantStatus::SafeStop {
+                events.safe_stop_cleared = true;
+            }
+            if let Some(from) = from {
+                self.blend = (self.cfg.blend_ticks > 0).then_some(Blend { from, done_ticks: 0 });
+            }
+            let applied = match self.blend.as_mut() {
+                Some(b) => {
+                    b.done_ticks += 1;
+                    let a = b.done_ticks as f64 / self.cfg.blend_ticks as f64;
+                    let from = match b.from {
+                        BlendFrom::Held(x) => x,
+                        BlendFrom::SafeStop => gravity - qd * self.cfg.safe_stop_damping_nms,
+                    };
+                    if b.done_ticks >= self.cfg.blend_ticks {
+                        self.blend = None;
+                    }
+                    from + (tau - from) * a
+                }
+                None => tau,
+            };
+            self.status = PlantStatus::Running;
+            self.consecutive_misses = 0;
+            self.last_applied = applied;
+            return Decision { tau: applied, held: false, missed: false, refused: None, events };
+        }
+
+        // Miss: nothing in time, or refused. Before any controller, only refusals count.
+        if refused.is_some() {
+            self.refusals += 1;
+        }
+        let counts = refused.is_some() || self.status != PlantStatus::WaitingForController;
+        if counts {
+            self.total_misses += 1;
+            self.consecutive_misses += 1;
+            if self.consecutive_misses == 1 {
+                events.miss_streak_started = true;
+            }
+            if self.consecutive_misses >= self.cfg.max_consecutive_misses && self.status != PlantStatus::SafeStop {
+                self.status = PlantStatus::SafeStop;
+                self.safe_stops += 1;
+                events.safe_stop_entered = true;
+            } else if self.status == PlantStatus::Running {
+                self.status = PlantStatus::HoldingTorque;
+            }
+        }
+        let tau = match self.status {
+            PlantStatus::WaitingForController | PlantStatus::SafeStop => self.safe_stop_torque(gravity, qd),
+            _ => self.last_applied,
+        };
+        self.last_applied = tau;
+        Decision { tau, held: true, missed: counts, refused, events }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LIMIT: [f64; 6] = [100.0; 6];
+
+    fn cfg() -> GateConfig {
+        GateConfig { max_consecutive_misses: 3, blend_ticks: 4, safe_stop_damping_nms: 2.0, torque_limit_nm: LIMIT }
+    }
+
+    fn torque(id: u64, tau: f64) -> JointTorque {
+        JointTorque {
+            contract_version: CONTRACT_VERSION,
+            controller_status: ControllerStatus::Active as u32,
+            tick: 0,
+            controller_id: id,
+            tau: [tau; 6],
+        }
+    }
+
+    const G: f64 = 10.0;
+    fn g() -> Vec6 {
+        Vec6::from_element(G)
+    }
+
+    #[test]
+    fn first_controller_blends_in_from_gravity_compensation() {
+        let mut gate = Gate::new(cfg());
+        let qd = Vec6::zeros();
+        let d = gate.decide(None, &g(), &qd);
+        assert_eq!(d.tau, g());
+        assert!(!d.missed, "no miss before the first controller");
+        let taus: Vec<f64> = (0..5).map(|_| gate.decide(Some(&torque(1, 30.0)), &g(), &qd).tau[0]).collect();
+        // Linear from 10 to 30 over 4 ticks, then the controller's value.
+        assert_eq!(taus, vec![15.0, 20.0, 25.0, 30.0, 30.0]);
+        assert_eq!(gate.status(), PlantStatus::Running);
+    }
+
+    #[test]
+    fn misses_hold_then_safe_stop_then_resume_without_jump() {
+        let mut gate = Gate::new(GateConfig { blend_ticks: 0, ..cfg() });
+        let qd = Vec6::from_element(1.0);
+        gate.decide(Some(&torque(1, 50.0)), &g(), &qd);
+        let d1 = gate.decide(None, &g(), &qd);
+        assert!(d1.held && d1.missed && d1.events.miss_streak_started);
+        assert_eq!(d1.tau[0], 50.0);
+        assert_eq!(gate.status(), PlantStatus::HoldingTorque);
+        gate.decide(None, &g(), &qd);
+        let d3 = gate.decide(None, &g(), &qd);
+        assert!(d3.events.safe_stop_entered);
+        assert_eq!(gate.status(), PlantStatus::SafeStop);
+        assert_eq!(d3.tau[0], G - 2.0 * 1.0, "gravity minus damping");
+        assert_eq!(gate.total_misses(), 3);
+        assert_eq!(gate.safe_stops(), 1);
+        // With blending on, the comeback starts near the safe-stop torque.
+        let mut gate2 = Gate::new(cfg());
+        gate2.decide(Some(&torque(1, 50.0)), &g(), &qd);
+        for _ in 0..3 {
+            gate2.decide(None, &g(), &qd);
+        }
+        let back = gate2.decide(Some(&torque(1, 50.0)), &g(), &qd);
+        assert!(back.events.safe_stop_cleared);
+        assert_eq!(back.tau[0], 8.0 + (50.0 - 8.0) / 4.0);
+    }
+
+    #[test]
+    fn new_controller_id_blends_from_the_held_torque() {
+        let mut gate = Gate::new(cfg());
+        let qd = Vec6::zeros();
+        for _ in 0..4 {
+            gate.decide(Some(&torque(1, 20.0)), &g(), &qd);
+        }
+        assert_eq!(gate.last_applied()[0], 20.0);
+        let d = gate.decide(Some(&torque(2, 60.0)), &g(), &qd);
+        assert_eq!(d.events.controller_change, Some((Some(1), 2)));
+        assert_eq!(d.tau[0], 30.0);
+    }
+
+    #[test]
+    fn refusals_are_misses_with_reasons() {
+        let mut gate = Gate::new(cfg());
+        let qd = Vec6::zeros();
+        gate.decide(Some(&torque(1, 20.0)), &g(), &qd);
+        let mut bad = torque(1, 20.0);
+        bad.tau[2] = f64::NAN;
+        let d = gate.decide(Some(&bad), &g(), &qd);
+        assert!(d.missed && d.held);
+        assert_eq!(d.refused, Some(Refusal::NotFinite { joint: 2 }));
+        let d = gate.decide(Some(&torque(1, 150.0)), &g(), &qd);
+        assert!(matches!(d.refused, Some(Refusal::OutOfLimit { joint: 0, .. })));
+        let mut other = torque(1, 20.0);
+        other.contract_version = CONTRACT_VERSION + 1;
+        let d = gate.decide(Some(&other), &g(), &qd);
+        let text = d.refused.unwrap().to_string();
+        assert!(text.contains(&format!("version {}", CONTRACT_VERSION + 1)), "{text}");
+        assert!(text.contains(&format!("version {CONTRACT_VERSION}")), "{text}");
+        assert_eq!(gate.refusals(), 3);
+        assert_eq!(gate.status(), PlantStatus::SafeStop, "3 refusals in a row reach the limit");
+    }
+
+    #[test]
+    fn controller_fault_requests_safe_stop() {
+        let mut gate = Gate::new(cfg());
+        let qd = Vec6::zeros();
+        let mut t = torque(1, 20.0);
+        t.controller_status = ControllerStatus::Fault as u32;
+        let d = gate.decide(Some(&t), &g(), &qd);
+        assert!(d.events.safe_stop_entered && d.events.controller_fault && !d.missed);
+        assert_eq!(d.tau, g());
+    }
+}

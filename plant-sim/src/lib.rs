@@ -1,0 +1,14 @@
+//! `plant-sim`: the clock master of the rig (DESIGN sections 5 and 6). It integrates the robot
+//! (and, with the strip model, the weatherstrip contact), publishes joint state and wrench each
+//! tick over iceoryx2, applies the controller's torque through the [`gate::Gate`] (misses, safe
+//! stop, takeover blending, refusals) and records every tick.
+
+pub mod gate;
+pub mod histogram;
+pub mod loop_rt;
+pub mod physics;
+pub mod rt;
+pub mod run;
+
+/// The recorder API the loop writes to.
+pub use recordings as recording;

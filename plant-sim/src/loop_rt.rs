@@ -1,0 +1,397 @@
+//! The plant's tick loop (DESIGN section 6), on a plain OS thread.
+//!
+//! Real-time mode, tick k: sleep until the absolute deadline t_k (CLOCK_MONOTONIC, TIMER_ABSTIME),
+//! publish state and wrench of tick k, wait on the torque listener's fd (`ppoll`) until
+//! t_k + budget for the torque answering tick k, let the [`Gate`] decide what to apply, integrate
+//! [t_k, t_k + T), record. If the thread falls behind by more than a period (a VM stall), the
+//! missed deadlines are skipped and counted as overruns instead of being run in a burst.
+//!
+//! Lockstep mode: no sleeping; the plant waits for every torque up to the watchdog. Before the first
+//! controller answers, tick 0 is republished every few milliseconds (a late-joining controller
+//! gets no history) and the simulation does not advance, so identical inputs give identical
+//! runs. When the watchdog expires the controller is presumed gone: the plant counts the miss and
+//! continues paced in real time (budget waits), so the safe stop is reached after
+//! `max_consecutive_misses` periods and a returning controller can take over.
+//!
+//! Per tick there is no allocation, no lock, no blocking I/O and no logging: ticks and events go
+//! to the recorder's wait-free queue; only rare events (miss streak start, safe stop, takeover,
+//! refusal, overrun) are also logged.
+
+use std::fmt::Write as _;
+use std::time::{Duration, Instant};
+
+use messages::ports::{PlantPorts, Wake};
+use messages::{state_flags, ControllerDiagnostics, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
+use scenario::Mode;
+
+use crate::gate::{Decision, Gate};
+use crate::histogram::Histogram;
+use crate::physics::Physics;
+use crate::recording::{EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
+use crate::rt;
+
+/// Loop parameters.
+#[derive(Debug, Clone, Copy)]
+pub struct LoopParams {
+    pub mode: Mode,
+    pub period_ns: u64,
+    pub budget_ns: u64,
+    pub watchdog_ns: u64,
+    /// Ticks to run (the run ends after tick `n_ticks - 1` was integrated).
+    pub n_ticks: u64,
+}
+
+/// Statistics of a run, kept in fixed-size histograms.
+#[derive(Debug, Clone)]
+pub struct LoopStats {
+    pub ticks: u64,
+    pub misses: u64,
+    pub safe_stops: u64,
+    pub refusals: u64,
+    pub overruns: u64,
+    /// Publish → torque received, for ticks answered in time.
+    pub round_trip: Histogram,
+    /// |actual period − nominal period| between consecutive publishes (real-time pacing only).
+    pub jitter: Histogram,
+    /// Plant work per tick: wake → publish plus torque received → tick integrated and recorded.
+    pub plant_compute: Histogram,
+    /// Controller compute as it reports it in its diagnostics.
+    pub controller_compute: Histogram,
+    pub wall_s: f64,
+    pub sim_s: f64,
+    pub stopped_by_signal: bool,
+}
+
+/// A short text on the stack for rare events (no heap allocation).
+struct StackText {
+    buf: [u8; 192],
+    len: usize,
+}
+
+impl StackText {
+    fn new() -> Self {
+        StackText { buf: [0; 192], len: 0 }
+    }
+    fn as_str(&self) -> &str {
+        std::str::from_utf8(&self.buf[..self.len]).unwrap_or("")
+    }
+}
+
+impl std::fmt::Write for StackText {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        let n = s.len().min(self.buf.len() - self.len);
+        // Cut on a char boundary.
+        let n = (0..=n).rev().find(|&i| s.is_char_boundary(i)).unwrap_or(0);
+        self.buf[self.len..self.len + n].copy_from_slice(&s.as_bytes()[..n]);
+        self.len += n;
+        Ok(())
+    }
+}
+
+/// Everything the loop touches.
+pub struct PlantLoop<'a> {
+    pub ports: &'a PlantPorts,
+    pub physics: &'a mut Physics,
+    pub gate: &'a mut Gate,
+    pub recorder: Option<&'a mut Recorder>,
+    pub params: LoopParams,
+}
+
+/// How long a lockstep plant republishes the waiting state while no controller has answered yet.
+const LOCKSTEP_REPUBLISH: Duration = Duration::from_millis(5);
+
+impl PlantLoop<'_> {
+    fn event(&mut self, tick: u64, sim_time_s: f64, kind: EventKind, text: &str) {
+        if let Some(r) = self.recorder.as_deref_mut() {
+            r.record_event(&EventRecord::new(tick, sim_time_s, kind, text));
+        }
+    }
+
+    fn state(&self, tick: u64, prev: Option<&Decision>) -> JointState {
+        let mut flags = 0;
+        if let Some(d) = prev {
+            if d.held {
+                flags |= state_flags::TORQUE_HELD;
+            }
+            if d.refused.is_some() {
+                flags |= state_flags::TORQUE_REFUSED;
+            }
+        }
+        if self.params.mode == Mode::Lockstep {
+            flags |= state_flags::LOCKSTEP;
+        }
+        if self.physics.in_contact() {
+            flags |= state_flags::IN_CONTACT;
+        }
+        JointState {
+            contract_version: CONTRACT_VERSION,
+            plant_status: self.gate.status() as u32,
+            tick,
+            sim_time_s: tick as f64 * self.params.period_ns as f64 * 1e-9,
+            q: self.physics.q().into(),
+            qd: self.physics.qd().into(),
+            tau_applied: self.gate.last_applied().into(),
+            period_s: self.params.period_ns as f64 * 1e-9,
+            flags,
+            consecutive_misses: self.gate.consecutive_misses(),
+            total_misses: self.gate.total_misses(),
+        }
+    }
+
+    fn wrench(&self, tick: u64) -> Wrench {
+        let (force, torque) = self.physics.wrench();
+        Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick, force, torque }
+    }
+
+    /// Turn the gate's rare events into recorded events and log lines.
+    fn report(&mut self, tick: u64, t: f64, d: &Decision, prev_refused: bool) {
+        let e = d.events;
+        if let Some(r) = d.refused {
+            // Log and record the first refusal of a streak only (a bad controller refuses every tick).
+            if !prev_refused {
+                let mut s = StackText::new();
+                let _ = write!(s, "tick {tick}: {r}");
+                let kind = if matches!(r, crate::gate::Refusal::Version(_)) { EventKind::VersionMismatch } else { EventKind::TorqueRefused };
+                tracing::warn!("{}", s.as_str());
+                self.event(tick, t, kind, s.as_str());
+            }
+        }
+        if e.miss_streak_started {
+            let mut s = StackText::new();
+            let _ = write!(s, "tick {tick}: no valid torque in time, holding the last one");
+            tracing::warn!("{}", s.as_str());
+            self.event(tick, t, EventKind::Miss, s.as_str());
+        }
+        if e.safe_stop_entered {
+            let mut s = StackText::new();
+            if e.controller_fault {
+                let _ = write!(s, "tick {tick}: safe stop requested by the controller (fault)");
+            } else {
+                let _ = write!(s, "tick {tick}: safe stop after {} consecutive misses (gravity compensation + joint damping)", self.gate.consecutive_misses());
+            }
+            tracing::error!("{}", s.as_str());
+            self.event(tick, t, EventKind::SafeStop, s.as_str());
+        }
+        if e.safe_stop_cleared {
+            let mut s = StackText::new();
+            let _ = write!(s, "tick {tick}: safe stop cleared, controller resumes (blended in)");
+            tracing::info!("{}", s.as_str());
+            self.event(tick, t, EventKind::SafeStopCleared, s.as_str());
+        }
+        if let Some((old, new)) = e.controller_change {
+            let mut s = StackText::new();
+            match old {
+                Some(old) => {
+                    let _ = write!(s, "tick {tick}: controller {new:#x} takes over from {old:#x} (blended in)");
+                }
+                None => {
+                    let _ = write!(s, "tick {tick}: controller {new:#x} connected");
+                }
+            }
+            tracing::info!("{}", s.as_str());
+            self.event(tick, t, EventKind::ControllerChange, s.as_str());
+        }
+    }
+
+    /// Wait for the torque answering `tick` until `deadline`. Returns it and when it was taken.
+    fn wait_for_torque(&self, tick: u64, deadline: Instant) -> Option<JointTorque> {
+        loop {
+            if let Some(t) = self.ports.receive_torque_for(tick) {
+                return Some(t);
+            }
+            if self.ports.wait_torque(deadline) == Wake::Timeout {
+                return self.ports.receive_torque_for(tick);
+            }
+        }
+    }
+
+    /// Run until `n_ticks` ticks are integrated or a stop signal arrives.
+    pub fn run(&mut self) -> LoopStats {
+        let p = self.params;
+        let mut stats = LoopStats {
+            ticks: 0,
+            misses: 0,
+            safe_stops: 0,
+            refusals: 0,
+            overruns: 0,
+            round_trip: Histogram::for_latency(),
+            jitter: Histogram::for_latency(),
+            plant_compute: Histogram::for_latency(),
+            controller_compute: Histogram::for_latency(),
+            wall_s: 0.0,
+            sim_s: 0.0,
+            stopped_by_signal: false,
+        };
+        // One reference instant for both clocks: Instant is CLOCK_MONOTONIC on Linux.
+        let (origin, origin_ns) = (Instant::now(), rt::now_mono_ns());
+        let at = |ns: u64| origin + Duration::from_nanos(ns.saturating_sub(origin_ns));
+        let mut next_deadline_ns = origin_ns + p.period_ns;
+        let mut paced = p.mode == Mode::Realtime;
+        let mut prev: Option<Decision> = None;
+        let mut last_publish_ns: u64 = 0;
+        let mut tick: u64 = 0;
+        let mut strip = StripRecord::default();
+
+        while tick < p.n_ticks {
+            if rt::stop_requested() {
+                stats.stopped_by_signal = true;
+                break;
+            }
+            let sim_t = tick as f64 * p.period_ns as f64 * 1e-9;
+            // 1. The deadline of this tick (paced modes), skipping ahead after a stall.
+            let deadline_ns = if paced {
+                let now = rt::now_mono_ns();
+                if now > next_deadline_ns + p.period_ns {
+                    let skipped = (now - next_deadline_ns) / p.period_ns;
+                    next_deadline_ns += skipped * p.period_ns;
+                    stats.overruns += skipped;
+                    let mut s = StackText::new();
+                    let _ = write!(s, "tick {tick}: loop {} us late, skipped {skipped} periods", (now - next_deadline_ns + skipped * p.period_ns) / 1000);
+                    tracing::warn!("{}", s.as_str());
+                    self.event(tick, sim_t, EventKind::Info, s.as_str());
+                }
+                rt::sleep_until_mono_ns(next_deadline_ns);
+                next_deadline_ns
+            } else {
+                rt::now_mono_ns()
+            };
+            let wake_ns = rt::now_mono_ns();
+
+            // 2. Publish state and wrench of this tick.
+            let state = self.state(tick, prev.as_ref());
+            let wrench = self.wrench(tick);
+            let publish_wall_ns = rt::now_wall_ns();
+            let publish_ns = rt::now_mono_ns();
+            if let Err(e) = self.ports.publish(&state, &wrench) {
+                tracing::error!("{e}");
+                self.event(tick, sim_t, EventKind::Fault, "publishing the state failed");
+            }
+            let period_ns = if last_publish_ns == 0 { 0 } else { publish_ns - last_publish_ns };
+            if p.mode == Mode::Realtime && last_publish_ns != 0 {
+                stats.jitter.record(period_ns.abs_diff(p.period_ns));
+            }
+            last_publish_ns = publish_ns;
+            let pre_ns = publish_ns - wake_ns;
+
+            // 3. Wait for the torque of this tick.
+            let torque = if paced {
+                self.wait_for_torque(tick, at(deadline_ns + p.budget_ns))
+            } else if self.gate.status() == PlantStatus::WaitingForController {
+                // Lockstep start-up: hold tick 0 until a controller answers it.
+                let mut got = None;
+                while !rt::stop_requested() {
+                    got = self.wait_for_torque(tick, Instant::now() + LOCKSTEP_REPUBLISH);
+                    if got.is_some() {
+                        break;
+                    }
+                    let _ = self.ports.publish(&state, &wrench);
+                }
+                got
+            } else {
+                self.wait_for_torque(tick, at(publish_ns + p.watchdog_ns))
+            };
+            if rt::stop_requested() && torque.is_none() {
+                stats.stopped_by_signal = true;
+                break;
+            }
+            let recv_ns = rt::now_mono_ns();
+            let recv_wall_ns = if torque.is_some() { rt::now_wall_ns() } else { 0 };
+            let diag = self.ports.receive_diagnostics().filter(|d| d.tick == tick);
+
+            // 4. Decide and integrate.
+            let decision = self.gate.decide(torque.as_ref(), &self.physics.gravity_torque(), &self.physics.qd());
+            if p.mode == Mode::Lockstep {
+                // Watchdog expired: pace in real time until a controller answers again.
+                if !paced && decision.missed && torque.is_none() {
+                    paced = true;
+                    next_deadline_ns = rt::now_mono_ns() + p.period_ns;
+                    let text = "lockstep watchdog expired: pacing in real time until a controller answers";
+                    tracing::warn!("tick {tick}: {text}");
+                    self.event(tick, sim_t, EventKind::ModeChange, text);
+                } else if paced && !decision.held {
+                    paced = false;
+                    self.event(tick, sim_t, EventKind::ModeChange, "controller answers again: back to lockstep");
+                }
+            }
+            self.report(tick, sim_t, &decision, prev.as_ref().is_some_and(|d| d.refused.is_some()));
+            self.physics.step_tick(&decision.tau);
+
+            // 5. Record.
+            let round_trip_ns = if torque.is_some() { recv_ns - publish_ns } else { 0 };
+            if torque.is_some() && !decision.missed {
+                stats.round_trip.record(round_trip_ns);
+            }
+            if let Some(d) = diag.as_ref() {
+                stats.controller_compute.record(d.compute_time_ns);
+            }
+            self.physics.fill_strip_record(&mut strip);
+            let applied = JointTorque {
+                contract_version: CONTRACT_VERSION,
+                controller_status: torque.map_or(0, |t| t.controller_status),
+                tick,
+                controller_id: self.gate.controller_id().unwrap_or(0),
+                tau: decision.tau.into(),
+            };
+            let mut rec = TickRecord {
+                state,
+                wrench,
+                torque: applied,
+                torque_held: decision.held,
+                diag: diag.unwrap_or(ZERO_DIAG),
+                has_diag: diag.is_some(),
+                strip,
+                timing: TimingRecord {
+                    publish_wall_ns,
+                    torque_receive_wall_ns: recv_wall_ns,
+                    round_trip_ns,
+                    period_ns,
+                    missed: decision.missed,
+                    plant_compute_ns: 0,
+                    controller_compute_ns: diag.map_or(0, |d| d.compute_time_ns),
+                },
+            };
+            let plant_ns = pre_ns + (rt::now_mono_ns() - recv_ns);
+            rec.timing.plant_compute_ns = plant_ns;
+            stats.plant_compute.record(plant_ns);
+            if let Some(r) = self.recorder.as_deref_mut() {
+                r.record_tick(&rec);
+            }
+
+            prev = Some(decision);
+            tick += 1;
+            if paced {
+                next_deadline_ns += p.period_ns;
+            }
+        }
+
+        stats.ticks = tick;
+        stats.misses = self.gate.total_misses();
+        stats.safe_stops = self.gate.safe_stops();
+        stats.refusals = self.gate.refusals();
+        stats.wall_s = (rt::now_mono_ns() - origin_ns) as f64 * 1e-9;
+        stats.sim_s = self.physics.time_s();
+
+        // Goodbye: the last state says ShuttingDown so controllers exit.
+        let mut last = self.state(tick, prev.as_ref());
+        last.plant_status = PlantStatus::ShuttingDown as u32;
+        let _ = self.ports.publish(&last, &self.wrench(tick));
+        let t_end = stats.sim_s;
+        let mut s = StackText::new();
+        let _ = write!(s, "plant stopped after {tick} ticks ({})", if stats.stopped_by_signal { "signal" } else { "duration reached" });
+        self.event(tick, t_end, EventKind::Stop, s.as_str());
+        stats
+    }
+}
+
+const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics {
+    contract_version: 0,
+    force_control_active: 0,
+    tick: 0,
+    force_ref_n: 0.0,
+    force_meas_n: 0.0,
+    pos_ref_task_m: [0.0; 3],
+    pos_err_task_m: [0.0; 3],
+    rot_err_task_rad: [0.0; 3],
+    force_integral_ns: 0.0,
+    compute_time_ns: 0,
+};

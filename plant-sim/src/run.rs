@@ -1,0 +1,176 @@
+//! One plant run from start to summary: scenario, ports, recorder, real-time set-up, the loop,
+//! shutdown. `main.rs` only parses arguments and prints.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use scenario::{Mode, Scenario};
+
+use crate::gate::{Gate, GateConfig};
+use crate::loop_rt::{LoopParams, LoopStats, PlantLoop};
+use crate::physics::Physics;
+use crate::recording::{EventKind, EventRecord, Recorder, RecorderConfig};
+use crate::rt;
+
+/// Options of one plant run (the command line of `plant-sim`).
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    pub rig: String,
+    pub scenario_path: PathBuf,
+    pub mode: Option<Mode>,
+    /// Simulated seconds to run; None = the scenario's `loop.duration_s`, or the trajectory's length.
+    pub duration_s: Option<f64>,
+    /// MCAP file; None = `runs/<unix time>-<rig>/run.mcap`.
+    pub out: Option<PathBuf>,
+    pub cache_dir: PathBuf,
+}
+
+/// Run length when neither the command line nor the scenario sets one: the nominal trajectory
+/// (settle, approach from `approach_height_mm` at `approach_speed_mm_s`, force ramp, dwell, roll,
+/// ramp-down, lift) plus 0.2 s.
+pub fn nominal_duration_s(s: &Scenario) -> f64 {
+    let t = &s.trajectory;
+    let approach = if t.approach_speed_mm_s > 0.0 { t.approach_height_mm / t.approach_speed_mm_s } else { 0.0 };
+    t.settle_s + approach + t.force_ramp_s + t.dwell_s + t.roll_s + t.ramp_down_s + t.lift_s + 0.2
+}
+
+/// Default recording path of a rig.
+pub fn default_recording_path(rig: &str) -> PathBuf {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    Path::new("runs").join(format!("{secs}-{rig}")).join("run.mcap")
+}
+
+/// Result of a run, printed by `plant-sim` as one JSON line.
+pub struct RunSummary {
+    pub stats: LoopStats,
+    pub recording: Option<PathBuf>,
+    pub drops: u64,
+    pub mode: Mode,
+    pub rt: rt::RtSetup,
+}
+
+impl RunSummary {
+    pub fn to_json(&self, rig: &str) -> serde_json::Value {
+        let s = &self.stats;
+        let us = |ns: u64| ns as f64 * 1e-3;
+        let edges = [0.0, 10.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0, 300.0, 500.0, 1000.0, 2000.0];
+        serde_json::json!({
+            "rig": rig,
+            "mode": match self.mode { Mode::Realtime => "realtime", Mode::Lockstep => "lockstep" },
+            "ticks": s.ticks,
+            "misses": s.misses,
+            "safe_stops": s.safe_stops,
+            "refusals": s.refusals,
+            "overruns": s.overruns,
+            "rt_p50_us": us(s.round_trip.quantile_ns(0.5)),
+            "rt_p99_us": us(s.round_trip.quantile_ns(0.99)),
+            "rt_max_us": us(s.round_trip.max_ns()),
+            "recording": self.recording.as_ref().map(|p| p.display().to_string()),
+            "drops": self.drops,
+            "wall_s": s.wall_s,
+            "sim_s": s.sim_s,
+            "speed_factor": if s.wall_s > 0.0 { s.sim_s / s.wall_s } else { 0.0 },
+            "stopped_by_signal": s.stopped_by_signal,
+            "sched_fifo": self.rt.sched_fifo,
+            "mlockall": self.rt.mlockall,
+            "round_trip": s.round_trip.to_json(&edges),
+            "jitter": s.jitter.to_json(&edges),
+            "plant_compute": s.plant_compute.to_json(&edges),
+            "controller_compute": s.controller_compute.to_json(&edges),
+        })
+    }
+}
+
+/// Run the plant until the duration is reached or SIGINT/SIGTERM arrives.
+pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
+    messages::services::validate_rig_name(&opts.rig).map_err(anyhow::Error::msg)?;
+    let scenario = Scenario::load(&opts.scenario_path)?;
+    let scenario_text = std::fs::read_to_string(&opts.scenario_path)
+        .with_context(|| format!("reading {}", opts.scenario_path.display()))?;
+    let mode = opts.mode.unwrap_or(scenario.loop_.mode);
+    let l = &scenario.loop_;
+    let duration_s = opts
+        .duration_s
+        .or((l.duration_s > 0.0).then_some(l.duration_s))
+        .unwrap_or_else(|| nominal_duration_s(&scenario));
+    anyhow::ensure!(duration_s.is_finite() && duration_s > 0.0, "duration {duration_s} s must be positive");
+    let period_ns = (l.period_s * 1e9).round() as u64;
+    let params = LoopParams {
+        mode,
+        period_ns,
+        budget_ns: (l.torque_budget_us * 1e3).round() as u64,
+        watchdog_ns: (l.lockstep_watchdog_s * 1e9).round() as u64,
+        n_ticks: (duration_s / l.period_s).round() as u64,
+    };
+
+    let cleaned = messages::ports::clean_dead_nodes();
+    if cleaned > 0 {
+        tracing::info!("removed the shared-memory leftovers of {cleaned} dead iceoryx2 node(s)");
+    }
+    rt::install_stop_signals();
+
+    let mut physics = Physics::new(&scenario, &opts.cache_dir)?;
+    let mut gate = Gate::new(GateConfig {
+        max_consecutive_misses: l.max_consecutive_misses,
+        blend_ticks: (l.takeover_blend_s / l.period_s).round() as u32,
+        safe_stop_damping_nms: l.safe_stop_damping_nms,
+        torque_limit_nm: robot::Robot::TORQUE_LIMIT_NM,
+    });
+    let ports = messages::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
+
+    let recording = scenario.recording.enabled.then(|| opts.out.clone().unwrap_or_else(|| default_recording_path(&opts.rig)));
+    let mut recorder = match &recording {
+        Some(path) => {
+            if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            }
+            let metadata = vec![
+                ("rig".to_string(), opts.rig.clone()),
+                ("mode".to_string(), format!("{mode:?}").to_lowercase()),
+                ("scenario_path".to_string(), opts.scenario_path.display().to_string()),
+                ("scenario_toml".to_string(), scenario_text),
+                ("contract_version".to_string(), messages::CONTRACT_VERSION.to_string()),
+                ("period_s".to_string(), l.period_s.to_string()),
+                ("substeps".to_string(), l.substeps.to_string()),
+                ("integrator".to_string(), "rk4".to_string()),
+            ];
+            let cfg = RecorderConfig {
+                path: path.clone(),
+                queue_capacity: scenario.recording.queue_capacity,
+                chunk_size_bytes: scenario.recording.chunk_size_bytes,
+                metadata,
+            };
+            Some(Recorder::start(cfg).with_context(|| format!("starting the recorder on {}", path.display()))?)
+        }
+        None => None,
+    };
+
+    // Real-time set-up after the recorder's writer thread exists (it keeps the normal policy).
+    let rt_setup = rt::setup_thread(80);
+    if !rt_setup.sched_fifo || !rt_setup.mlockall {
+        tracing::warn!(
+            "real-time set-up incomplete: SCHED_FIFO {}, mlockall {} (needs CAP_SYS_NICE/rtprio and memlock limits); running best-effort",
+            if rt_setup.sched_fifo { "on" } else { "refused" },
+            if rt_setup.mlockall { "on" } else { "refused" }
+        );
+    }
+    tracing::info!(
+        rig = %opts.rig,
+        mode = ?mode,
+        ticks = params.n_ticks,
+        recording = ?recording,
+        "plant running"
+    );
+    if let Some(r) = recorder.as_mut() {
+        let text = format!("plant started: rig {}, mode {mode:?}, {} ticks", opts.rig, params.n_ticks);
+        r.record_event(&EventRecord::new(0, 0.0, EventKind::Start, &text));
+    }
+
+    let stats = PlantLoop { ports: &ports, physics: &mut physics, gate: &mut gate, recorder: recorder.as_mut(), params }.run();
+    let drops = recorder.as_ref().map_or(0, |r| r.dropped());
+    if let Some(r) = recorder {
+        r.finish().context("finishing the recording")?;
+    }
+    tracing::info!(ticks = stats.ticks, misses = stats.misses, safe_stops = stats.safe_stops, "plant stopped");
+    Ok(RunSummary { stats, recording, drops, mode, rt: rt_setup })
+}
