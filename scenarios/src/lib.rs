@@ -284,6 +284,10 @@ pub struct ControllerConfig {
     pub rotation_bandwidth_hz: f64,
     /// Joint-space damping added in the null of nothing (small, for the wrist), N m s/rad.
     pub joint_damping_nms: f64,
+    /// Driving-point stiffness of the strip under the wheel, N/m: the force-loop design rule's
+    /// plant (controller::gains). The controller does not link the strip model, so the value
+    /// comes from here; the default is the strip model's static report (10 N wheel at mid-strip).
+    pub strip_stiffness_n_per_m: f64,
 }
 
 impl Default for ControllerConfig {
@@ -297,6 +301,7 @@ impl Default for ControllerConfig {
             motion_damping_ratio: 1.0,
             rotation_bandwidth_hz: 10.0,
             joint_damping_nms: 0.0,
+            strip_stiffness_n_per_m: 3.0e4,
         }
     }
 }
@@ -406,6 +411,9 @@ impl Scenario {
         }
         if !(t.roll_s > 0.0) {
             return Err(bad("trajectory.roll_s", t.roll_s, "must be positive"));
+        }
+        if !(self.controller.strip_stiffness_n_per_m > 0.0 && self.controller.strip_stiffness_n_per_m.is_finite()) {
+            return Err(bad("controller.strip_stiffness_n_per_m", self.controller.strip_stiffness_n_per_m, "must be positive and finite"));
         }
         if !(self.recording.queue_capacity >= 16) {
             return Err(bad("recording.queue_capacity", self.recording.queue_capacity as f64, "must be at least 16"));

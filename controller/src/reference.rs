@@ -1,0 +1,391 @@
+//! The scenario's references (thesis Figure 6.6 plus approach and lift-off), in the task frame of
+//! DESIGN section 3, as a small state machine driven by simulated time and the measured force:
+//!
+//! settle (hold the start pose) → approach from above at constant speed (position control along
+//! y) until |F| > threshold → force ramp from the contact force to `force_ref` → dwell → roll
+//! z_start → z_end with a cosine velocity profile → force ramp-down to 0 → lift-off (position
+//! control along y back above the strip) → done (hold).
+//!
+//! Positions are of the TCP (the wheel's lowest point, the nominal contact point). All time profiles are C¹ (position and velocity
+//! continuous) so the PD feed-forward never sees steps.
+
+use nalgebra::Vector3;
+use scenario::Scenario;
+
+use crate::model::STRIP_TOP_HEIGHT_M;
+
+/// Phase of the run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    Settle,
+    Approach,
+    ForceRamp,
+    Dwell,
+    Roll,
+    RampDown,
+    Lift,
+    Done,
+}
+
+/// Reference of one tick, task frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TaskReference {
+    pub phase: Phase,
+    /// TCP position, velocity and acceleration references, task frame (m, m/s, m/s²).
+    pub pos_m: Vector3<f64>,
+    pub vel_mps: Vector3<f64>,
+    pub acc_mps2: Vector3<f64>,
+    /// Force set-point on the strip along task y, N (negative = pressing).
+    pub force_y_n: f64,
+    /// True while task y is force controlled (hybrid impedance); false for position control.
+    pub force_mode: bool,
+}
+
+/// Parameters of the reference (SI), from `scenario.trajectory` and the geometry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReferenceParams {
+    /// TCP start position in the task frame.
+    pub start_task_m: Vector3<f64>,
+    pub settle_s: f64,
+    pub approach_speed_mps: f64,
+    /// Time over which the approach speed ramps in (cosine), s.
+    pub approach_ramp_s: f64,
+    pub contact_threshold_n: f64,
+    pub force_ref_n: f64,
+    pub force_ramp_s: f64,
+    pub dwell_s: f64,
+    pub z_start_m: f64,
+    pub z_end_m: f64,
+    pub roll_s: f64,
+    pub ramp_down_s: f64,
+    /// TCP height (task y) to lift to at the end.
+    pub lift_y_m: f64,
+    pub lift_s: f64,
+}
+
+impl ReferenceParams {
+    /// From the scenario: the wheel's lowest point (the TCP) starts `approach_height_mm` above
+    /// the nominal strip top at `z_start_mm`, centred on the strip (the plant's start pose).
+    pub fn from_scenario(s: &Scenario) -> ReferenceParams {
+        let t = &s.trajectory;
+        let z_start_m = t.z_start_mm * 1e-3;
+        ReferenceParams {
+            start_task_m: Vector3::new(0.0, STRIP_TOP_HEIGHT_M + t.approach_height_mm * 1e-3, z_start_m),
+            settle_s: t.settle_s,
+            approach_speed_mps: t.approach_speed_mm_s * 1e-3,
+            approach_ramp_s: 0.05,
+            contact_threshold_n: t.contact_threshold_n,
+            force_ref_n: t.force_ref_n,
+            force_ramp_s: t.force_ramp_s,
+            dwell_s: t.dwell_s,
+            z_start_m,
+            z_end_m: t.z_end_mm * 1e-3,
+            roll_s: t.roll_s,
+            ramp_down_s: t.ramp_down_s,
+            lift_y_m: STRIP_TOP_HEIGHT_M + t.lift_mm * 1e-3,
+            lift_s: t.lift_s,
+        }
+    }
+}
+
+/// Smooth 0 → 1 blend `(1 − cos πx)/2` and its first two derivatives in x (clamped outside [0, 1]).
+#[inline]
+pub fn cosine_blend(x: f64) -> (f64, f64, f64) {
+    use std::f64::consts::PI;
+    if x <= 0.0 {
+        (0.0, 0.0, 0.0)
+    } else if x >= 1.0 {
+        (1.0, 0.0, 0.0)
+    } else {
+        let (s, c) = (PI * x).sin_cos();
+        (0.5 * (1.0 - c), 0.5 * PI * s, 0.5 * PI * PI * c)
+    }
+}
+
+/// Cosine velocity profile over `[0, duration]` covering `distance` (thesis Figure 6.6):
+/// v(τ) = (d/T)(1 − cos 2πτ/T). Returns (position offset, velocity, acceleration).
+#[inline]
+pub fn cosine_velocity_profile(tau: f64, duration: f64, distance: f64) -> (f64, f64, f64) {
+    use std::f64::consts::TAU;
+    if tau <= 0.0 {
+        return (0.0, 0.0, 0.0);
+    }
+    if tau >= duration {
+        return (distance, 0.0, 0.0);
+    }
+    let w = TAU / duration;
+    let v_mean = distance / duration;
+    let (s, c) = (w * tau).sin_cos();
+    (v_mean * (tau - s / w), v_mean * (1.0 - c), v_mean * w * s)
+}
+
+/// Approach descent below the start height after `tau` s: speed ramps in with a cosine over
+/// `ramp` s, then stays constant. Returns (descent, speed, acceleration), all ≥ 0 downwards.
+#[inline]
+fn approach_profile(tau: f64, ramp: f64, speed: f64) -> (f64, f64, f64) {
+    use std::f64::consts::PI;
+    if tau <= 0.0 {
+        (0.0, 0.0, 0.0)
+    } else if tau < ramp {
+        let (s, c) = (PI * tau / ramp).sin_cos();
+        (speed * (0.5 * tau - ramp / (2.0 * PI) * s), speed * 0.5 * (1.0 - c), speed * 0.5 * PI / ramp * s)
+    } else {
+        (speed * (tau - 0.5 * ramp), speed, 0.0)
+    }
+}
+
+/// The reference state machine. `update` is allocation-free.
+#[derive(Clone, Debug)]
+pub struct ReferenceGenerator {
+    p: ReferenceParams,
+    phase: Phase,
+    /// Time the current phase began, s.
+    t0: f64,
+    /// Force at contact detection (start of the ramp), N.
+    force_at_contact_n: f64,
+    /// TCP height when the lift-off began, m.
+    lift_from_y_m: f64,
+    /// TCP height reference when force control took over, m (held as the y reference in force mode).
+    y_at_contact_m: f64,
+}
+
+impl ReferenceGenerator {
+    pub fn new(p: ReferenceParams) -> Self {
+        ReferenceGenerator {
+            p,
+            phase: Phase::Settle,
+            t0: 0.0,
+            force_at_contact_n: 0.0,
+            lift_from_y_m: p.start_task_m.y,
+            y_at_contact_m: p.start_task_m.y,
+        }
+    }
+
+    pub fn params(&self) -> &ReferenceParams {
+        &self.p
+    }
+
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// Restart the state machine at time `t` (a controller taking over a running plant starts
+    /// from the approach's start pose).
+    pub fn reset(&mut self, t: f64) {
+        *self = ReferenceGenerator::new(self.p);
+        self.t0 = t;
+    }
+
+    /// Advance to time `t` (s) given the measured force on the strip along task y (N) and the
+    /// measured TCP height (task y, m), and return the reference for this tick.
+    pub fn update(&mut self, t: f64, force_y_n: f64, tcp_y_m: f64) -> TaskReference {
+        let p = self.p;
+        // Phase transitions (at most one per tick is enough at 1 kHz, but loop for robustness).
+        for _ in 0..8 {
+            let tau = t - self.t0;
+            let next = match self.phase {
+                Phase::Settle if tau >= p.settle_s => Some(Phase::Approach),
+                Phase::Approach if force_y_n.abs() > p.contact_threshold_n => {
+                    self.force_at_contact_n = force_y_n;
+                    let (d, _, _) = approach_profile(tau, p.approach_ramp_s, p.approach_speed_mps);
+                    self.y_at_contact_m = p.start_task_m.y - d;
+                    Some(Phase::ForceRamp)
+                }
+                Phase::ForceRamp if tau >= p.force_ramp_s => Some(Phase::Dwell),
+                Phase::Dwell if tau >= p.dwell_s => Some(Phase::Roll),
+                Phase::Roll if tau >= p.roll_s => Some(Phase::RampDown),
+                Phase::RampDown if tau >= p.ramp_down_s => {
+                    self.lift_from_y_m = tcp_y_m;
+                    Some(Phase::Lift)
+                }
+                Phase::Lift if tau >= p.lift_s => Some(Phase::Done),
+                _ => None,
+            };
+            match next {
+                Some(ph) => {
+                    // Event-driven transitions start now; timed ones at their exact boundary.
+                    self.t0 = match self.phase_duration() {
+                        Some(d) => self.t0 + d,
+                        None => t,
+                    };
+                    self.phase = ph;
+                }
+                None => break,
+            }
+        }
+        self.reference_at(t)
+    }
+
+    /// Duration of a timed phase.
+    fn phase_duration(&self) -> Option<f64> {
+        let p = &self.p;
+        match self.phase {
+            Phase::Settle => Some(p.settle_s),
+            Phase::ForceRamp => Some(p.force_ramp_s),
+            Phase::Dwell => Some(p.dwell_s),
+            Phase::Roll => Some(p.roll_s),
+            Phase::RampDown => Some(p.ramp_down_s),
+            Phase::Lift => Some(p.lift_s),
+            Phase::Approach | Phase::Done => None,
+        }
+    }
+
+    /// The reference of the current phase at time `t`.
+    fn reference_at(&self, t: f64) -> TaskReference {
+        let p = &self.p;
+        let tau = t - self.t0;
+        let s = p.start_task_m;
+        let mut r = TaskReference {
+            phase: self.phase,
+            pos_m: s,
+            vel_mps: Vector3::zeros(),
+            acc_mps2: Vector3::zeros(),
+            force_y_n: 0.0,
+            force_mode: false,
+        };
+        let z_end_offset = p.z_end_m - p.z_start_m;
+        match self.phase {
+            Phase::Settle => {}
+            Phase::Approach => {
+                let (d, v, a) = approach_profile(tau, p.approach_ramp_s, p.approach_speed_mps);
+                r.pos_m.y = s.y - d;
+                r.vel_mps.y = -v;
+                r.acc_mps2.y = -a;
+            }
+            Phase::ForceRamp => {
+                let (b, _, _) = cosine_blend(tau / p.force_ramp_s.max(1e-9));
+                r.force_y_n = self.force_at_contact_n + (p.force_ref_n - self.force_at_contact_n) * b;
+                r.force_mode = true;
+                r.pos_m.y = self.y_at_contact_m;
+            }
+            Phase::Dwell => {
+                r.force_y_n = p.force_ref_n;
+                r.force_mode = true;
+                r.pos_m.y = self.y_at_contact_m;
+            }
+            Phase::Roll => {
+                let (z, v, a) = cosine_velocity_profile(tau, p.roll_s, z_end_offset);
+                r.pos_m.z = s.z + z;
+                r.vel_mps.z = v;
+                r.acc_mps2.z = a;
+                r.force_y_n = p.force_ref_n;
+                r.force_mode = true;
+                r.pos_m.y = self.y_at_contact_m;
+            }
+            Phase::RampDown => {
+                let (b, _, _) = cosine_blend(tau / p.ramp_down_s.max(1e-9));
+                r.pos_m.z = p.z_end_m;
+                r.force_y_n = p.force_ref_n * (1.0 - b);
+                r.force_mode = true;
+                r.pos_m.y = self.y_at_contact_m;
+            }
+            Phase::Lift => {
+                let (b, db, ddb) = cosine_blend(tau / p.lift_s.max(1e-9));
+                let dy = p.lift_y_m - self.lift_from_y_m;
+                r.pos_m.z = p.z_end_m;
+                r.pos_m.y = self.lift_from_y_m + dy * b;
+                r.vel_mps.y = dy * db / p.lift_s;
+                r.acc_mps2.y = dy * ddb / (p.lift_s * p.lift_s);
+            }
+            Phase::Done => {
+                r.pos_m.z = p.z_end_m;
+                r.pos_m.y = p.lift_y_m;
+            }
+        }
+        r
+    }
+
+    /// Time from the start of the roll to the end of the lift-off (for run-length estimates), s.
+    pub fn tail_duration_s(&self) -> f64 {
+        let p = &self.p;
+        p.force_ramp_s + p.dwell_s + p.roll_s + p.ramp_down_s + p.lift_s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gen() -> ReferenceGenerator {
+        ReferenceGenerator::new(ReferenceParams::from_scenario(&Scenario::default()))
+    }
+
+    #[test]
+    fn cosine_velocity_integral_is_the_distance() {
+        let (t_roll, d) = (2.0, 0.036);
+        let n = 20_000;
+        let h = t_roll / n as f64;
+        // Trapezoidal integral of the velocity against the closed-form end position.
+        let mut integral = 0.0;
+        for i in 0..n {
+            let (_, v0, _) = cosine_velocity_profile(i as f64 * h, t_roll, d);
+            let (_, v1, _) = cosine_velocity_profile((i + 1) as f64 * h, t_roll, d);
+            integral += 0.5 * (v0 + v1) * h;
+        }
+        assert!((integral - d).abs() < 1e-9 * d.max(1.0), "{integral}");
+        assert_eq!(cosine_velocity_profile(t_roll, t_roll, d).0, d);
+        // Peak speed 2 d / T at mid-roll.
+        let (_, vmax, amid) = cosine_velocity_profile(0.5 * t_roll, t_roll, d);
+        assert!((vmax - 2.0 * d / t_roll).abs() < 1e-12 && amid.abs() < 1e-12);
+        // Acceleration is the derivative of velocity (central difference).
+        let (tau, e) = (0.37, 1e-6);
+        let dv = (cosine_velocity_profile(tau + e, t_roll, d).1 - cosine_velocity_profile(tau - e, t_roll, d).1) / (2.0 * e);
+        assert!((dv - cosine_velocity_profile(tau, t_roll, d).2).abs() < 1e-6);
+    }
+
+    /// Drive the whole state machine with a synthetic contact (force once the reference goes
+    /// below the strip top) and check position/velocity continuity tick to tick.
+    #[test]
+    fn profile_is_continuous_through_every_phase() {
+        let mut g = gen();
+        let p = *g.params();
+        let dt = 1e-4;
+        let contact_y = p.start_task_m.y - 0.003;
+        let mut prev: Option<TaskReference> = None;
+        let mut seen = Vec::new();
+        let mut t = 0.0;
+        while g.phase() != Phase::Done && t < 10.0 {
+            let y_meas = prev.map_or(p.start_task_m.y, |r| r.pos_m.y);
+            let f = if y_meas < contact_y { -1.0 } else { 0.0 };
+            let r = g.update(t, f, y_meas);
+            if seen.last() != Some(&r.phase) {
+                seen.push(r.phase);
+            }
+            if let Some(q) = prev {
+                // Position steps bounded by max speed * dt, velocity steps by max accel * dt
+                // (largest: the approach speed-in, v π / (2 T_ramp) = 0.31 m/s²).
+                // Task y is not a motion reference while force controlled: compare it only when
+                // both ticks are position controlled.
+                let mask = if r.force_mode || q.force_mode { Vector3::new(1.0, 0.0, 1.0) } else { Vector3::new(1.0, 1.0, 1.0) };
+                let dp = (r.pos_m - q.pos_m).component_mul(&mask).norm();
+                let dv = (r.vel_mps - q.vel_mps).component_mul(&mask).norm();
+                assert!(dp <= 0.04 * dt + 1e-12, "position jump {dp} at t={t} {:?}", r.phase);
+                assert!(dv <= 0.5 * dt + 1e-12, "velocity jump {dv} at t={t} {:?}", r.phase);
+                // Force ramps: at most 10 N · π / (2 · 0.2 s) = 79 N/s.
+                assert!((r.force_y_n - q.force_y_n).abs() <= 100.0 * dt + 1e-12 || q.phase == Phase::Approach);
+            }
+            prev = Some(r);
+            t += dt;
+        }
+        assert_eq!(
+            seen,
+            vec![Phase::Settle, Phase::Approach, Phase::ForceRamp, Phase::Dwell, Phase::Roll, Phase::RampDown, Phase::Lift, Phase::Done]
+        );
+        let last = prev.unwrap();
+        assert!((last.pos_m.z - p.z_end_m).abs() < 1e-15);
+        assert!((last.pos_m.y - p.lift_y_m).abs() < 1e-12);
+    }
+
+    #[test]
+    fn force_ramp_starts_at_the_contact_force() {
+        let mut g = gen();
+        let p = *g.params();
+        g.update(0.0, 0.0, p.start_task_m.y);
+        g.update(p.settle_s + 0.01, 0.0, p.start_task_m.y);
+        let r = g.update(p.settle_s + 0.02, -0.7, p.start_task_m.y);
+        assert_eq!(r.phase, Phase::ForceRamp);
+        assert!(r.force_mode && (r.force_y_n + 0.7).abs() < 1e-12);
+        let r = g.update(p.settle_s + 0.02 + p.force_ramp_s - 1e-9, -10.0, p.start_task_m.y);
+        assert!((r.force_y_n - p.force_ref_n).abs() < 1e-6);
+    }
+}
