@@ -1,1 +1,283 @@
-//! placeholder
+//! Recording, reading, replaying and reporting rig runs as MCAP files (DESIGN section 8).
+//!
+//! The plant hands one fixed-size [`TickRecord`] per tick (and an [`EventRecord`] per event) to a
+//! [`Recorder`]: a wait-free push into a bounded single-producer queue; a writer thread encodes the
+//! records as ROS 2 messages (CDR, `ros2msg` schemas embedded) into zstd-compressed MCAP chunks.
+//! Channels and their fields are listed in `recordings/README.md` and in [`schema`].
+//!
+//! - [`read::Recording`] reads a file back (also a truncated one, up to its last complete chunk).
+//! - [`report`] turns a recording into numbers and figures.
+//! - [`replay`] drives a controller open-loop from a recording and compares its torques.
+//! - [`cli`] holds the `rig replay` / `rig report` subcommands the `rig` binary wires in.
+
+pub mod cdr;
+pub mod cli;
+pub mod plots;
+pub mod read;
+pub mod replay;
+pub mod report;
+pub mod schema;
+pub mod synthetic;
+mod writer;
+
+pub use writer::{Recorder, RecorderConfig, RecorderError, RecorderTuning, RecordingSummary};
+
+use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, DOF};
+
+/// Most centre-line nodes a [`StripRecord`] carries (the 0.5 mm mesh of a 40 mm strip has 81).
+pub const MAX_CENTRELINE: usize = 256;
+
+/// Format version of the files this crate writes (metadata `rig/recording_format`).
+pub const RECORDING_FORMAT_VERSION: u32 = 1;
+
+/// Everything recorded for one tick. Fixed size and `Copy`, so the plant fills it on the stack and
+/// the queue copies it without touching the heap.
+#[derive(Debug, Clone, Copy)]
+pub struct TickRecord {
+    /// The joint state as published for this tick (tick, sim time, q, qd, status, flags, misses).
+    pub state: JointState,
+    /// The wrench as published for this tick.
+    pub wrench: Wrench,
+    /// Torque as APPLIED over [t_k, t_k + period) (fresh or held); its `tick` is the tick it answered.
+    pub torque: JointTorque,
+    /// True if `torque` was held from an earlier tick (late, missing or refused answer).
+    pub torque_held: bool,
+    /// Controller diagnostics for this tick, valid if `has_diag`.
+    pub diag: ControllerDiagnostics,
+    pub has_diag: bool,
+    pub strip: StripRecord,
+    pub timing: TimingRecord,
+}
+
+/// Strip outputs of one tick (DESIGN section 4). Task frame: z along the strip.
+#[derive(Debug, Clone, Copy)]
+pub struct StripRecord {
+    /// Wheel position along the strip (task z), m. This is z_a of the force map (5.33).
+    pub wheel_z_m: f64,
+    /// Contact force of the wheel on the strip, N.
+    pub contact_force_n: f64,
+    /// Total bottom reaction force, N.
+    pub bottom_force_n: f64,
+    /// Largest bottom pressure on the centre line x = 0, Pa.
+    pub max_bottom_pressure_pa: f64,
+    /// Normal displacement of the top surface under the wheel, m.
+    pub top_displacement_m: f64,
+    /// Number of valid entries in `centreline_pressure_pa`.
+    pub n_centreline: u32,
+    /// Bottom pressure at the centre-line nodes (x = 0), ordered by z, Pa. The nodes' z go once
+    /// into the recording's metadata (key `centreline_z_m`, a JSON array of m).
+    pub centreline_pressure_pa: [f64; MAX_CENTRELINE],
+}
+
+/// Loop timing of one tick. Wall-clock times are CLOCK_REALTIME ns since the Unix epoch.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct TimingRecord {
+    /// Wall clock when the plant published this tick's state.
+    pub publish_wall_ns: u64,
+    /// Wall clock when this tick's torque arrived, 0 if none arrived.
+    pub torque_receive_wall_ns: u64,
+    /// Receive minus publish, ns (0 if no torque arrived).
+    pub round_trip_ns: u64,
+    /// Time since the previous publish, ns.
+    pub period_ns: u64,
+    /// The torque for this tick was late, missing or refused.
+    pub missed: bool,
+    /// Plant compute time of this tick (integration, contact, strip), ns.
+    pub plant_compute_ns: u64,
+    /// Controller compute time reported in its diagnostics, ns (0 if none).
+    pub controller_compute_ns: u64,
+}
+
+/// What kind of event an [`EventRecord`] reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum EventKind {
+    Start = 0,
+    Stop = 1,
+    ModeChange = 2,
+    ControllerChange = 3,
+    /// First miss of a streak.
+    Miss = 4,
+    SafeStop = 5,
+    SafeStopCleared = 6,
+    TorqueRefused = 7,
+    VersionMismatch = 8,
+    RecordingError = 9,
+    Fault = 10,
+    Info = 11,
+}
+
+impl EventKind {
+    pub const ALL: [EventKind; 12] = [
+        Self::Start,
+        Self::Stop,
+        Self::ModeChange,
+        Self::ControllerChange,
+        Self::Miss,
+        Self::SafeStop,
+        Self::SafeStopCleared,
+        Self::TorqueRefused,
+        Self::VersionMismatch,
+        Self::RecordingError,
+        Self::Fault,
+        Self::Info,
+    ];
+
+    pub fn from_u8(v: u8) -> Option<Self> {
+        Self::ALL.get(v as usize).copied()
+    }
+
+    /// Snake-case name, as written into `/events.kind_name`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Start => "start",
+            Self::Stop => "stop",
+            Self::ModeChange => "mode_change",
+            Self::ControllerChange => "controller_change",
+            Self::Miss => "miss",
+            Self::SafeStop => "safe_stop",
+            Self::SafeStopCleared => "safe_stop_cleared",
+            Self::TorqueRefused => "torque_refused",
+            Self::VersionMismatch => "version_mismatch",
+            Self::RecordingError => "recording_error",
+            Self::Fault => "fault",
+            Self::Info => "info",
+        }
+    }
+}
+
+/// Longest event text kept; longer texts are cut at a character boundary.
+pub const EVENT_TEXT_MAX: usize = 192;
+
+/// One event (fault, safe stop, controller change, mode change...). Fixed size, no heap.
+#[derive(Debug, Clone, Copy)]
+pub struct EventRecord {
+    pub tick: u64,
+    pub sim_time_s: f64,
+    pub kind: EventKind,
+    pub text: [u8; EVENT_TEXT_MAX],
+    pub text_len: u16,
+    /// Wall clock (CLOCK_REALTIME ns) when the event was created; the MCAP publish time.
+    pub wall_ns: u64,
+}
+
+impl EventRecord {
+    /// Builds an event, cutting `text` to [`EVENT_TEXT_MAX`] bytes at a character boundary.
+    pub fn new(tick: u64, sim_time_s: f64, kind: EventKind, text: &str) -> Self {
+        let mut n = text.len().min(EVENT_TEXT_MAX);
+        while !text.is_char_boundary(n) {
+            n -= 1;
+        }
+        let mut buf = [0u8; EVENT_TEXT_MAX];
+        buf[..n].copy_from_slice(&text.as_bytes()[..n]);
+        Self { tick, sim_time_s, kind, text: buf, text_len: n as u16, wall_ns: wall_clock_ns() }
+    }
+
+    pub fn text(&self) -> &str {
+        // `new` only ever cuts at a character boundary.
+        std::str::from_utf8(&self.text[..self.text_len as usize]).unwrap_or("<invalid utf-8>")
+    }
+}
+
+/// CLOCK_REALTIME in ns since the Unix epoch (vDSO, no syscall on Linux).
+pub fn wall_clock_ns() -> u64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: ts is a valid timespec to write into.
+    unsafe { libc::clock_gettime(libc::CLOCK_REALTIME, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+impl Default for StripRecord {
+    fn default() -> Self {
+        Self {
+            wheel_z_m: 0.0,
+            contact_force_n: 0.0,
+            bottom_force_n: 0.0,
+            max_bottom_pressure_pa: 0.0,
+            top_displacement_m: 0.0,
+            n_centreline: 0,
+            centreline_pressure_pa: [0.0; MAX_CENTRELINE],
+        }
+    }
+}
+
+impl StripRecord {
+    /// The valid centre-line pressures.
+    pub fn centreline(&self) -> &[f64] {
+        &self.centreline_pressure_pa[..(self.n_centreline as usize).min(MAX_CENTRELINE)]
+    }
+}
+
+impl Default for TickRecord {
+    /// All zeros, current contract version: the plant overwrites what it has.
+    fn default() -> Self {
+        let v = messages::CONTRACT_VERSION;
+        Self {
+            state: JointState {
+                contract_version: v,
+                plant_status: 0,
+                tick: 0,
+                sim_time_s: 0.0,
+                q: [0.0; DOF],
+                qd: [0.0; DOF],
+                tau_applied: [0.0; DOF],
+                period_s: 0.0,
+                flags: 0,
+                consecutive_misses: 0,
+                total_misses: 0,
+            },
+            wrench: Wrench { contract_version: v, frame: 0, tick: 0, force: [0.0; 3], torque: [0.0; 3] },
+            torque: JointTorque { contract_version: v, controller_status: 0, tick: 0, controller_id: 0, tau: [0.0; DOF] },
+            torque_held: false,
+            diag: ControllerDiagnostics {
+                contract_version: v,
+                force_control_active: 0,
+                tick: 0,
+                force_ref_n: 0.0,
+                force_meas_n: 0.0,
+                pos_ref_task_m: [0.0; 3],
+                pos_err_task_m: [0.0; 3],
+                rot_err_task_rad: [0.0; 3],
+                force_integral_ns: 0.0,
+                compute_time_ns: 0,
+            },
+            has_diag: false,
+            strip: StripRecord::default(),
+            timing: TimingRecord::default(),
+        }
+    }
+}
+
+/// Simulated time of a tick in ns: the MCAP log time of every message of that tick.
+pub fn sim_time_ns(sim_time_s: f64) -> u64 {
+    if sim_time_s <= 0.0 || !sim_time_s.is_finite() {
+        0
+    } else {
+        (sim_time_s * 1e9).round() as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn event_text_is_cut_at_a_character_boundary() {
+        let long: String = "ä".repeat(150); // 300 bytes, 2 per char
+        let e = EventRecord::new(3, 0.003, EventKind::Fault, &long);
+        assert_eq!(e.text_len as usize, EVENT_TEXT_MAX);
+        assert_eq!(e.text(), &long[..EVENT_TEXT_MAX]);
+        let odd = format!("x{}", "ä".repeat(150)); // boundary falls inside a char at 192
+        let e = EventRecord::new(3, 0.003, EventKind::Fault, &odd);
+        assert_eq!(e.text_len as usize, EVENT_TEXT_MAX - 1);
+        assert!(odd.starts_with(e.text()));
+    }
+
+    #[test]
+    fn event_kinds_round_trip() {
+        for k in EventKind::ALL {
+            assert_eq!(EventKind::from_u8(k as u8), Some(k));
+        }
+        assert_eq!(EventKind::from_u8(EventKind::ALL.len() as u8), None);
+    }
+}

@@ -1,0 +1,501 @@
+//! The recorder: a wait-free queue from the plant's 1 kHz thread to a writer thread that owns the
+//! MCAP file (DESIGN section 6: the loop allocates nothing, takes no locks, does no I/O).
+//!
+//! Crash safety: the writer closes a chunk (and hands it to the OS) every `chunk_size_bytes` of
+//! uncompressed messages or every [`RecorderTuning::max_flush_interval`], whichever comes first,
+//! so a SIGKILL loses at most that much; chunks are built in memory, so the file never holds a
+//! half-written chunk except when the process dies inside one `write`. [`Recorder::finish`]
+//! writes the summary and index. A disk that runs low (below [`RecorderTuning::min_free_bytes`])
+//! ends the recording cleanly with an `/events` entry; a hard write error (ENOSPC, EIO) ends it
+//! where it is. Either way the writer keeps draining the queue, so the loop never notices.
+
+use crate::schema::{self, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
+use crate::{sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, RECORDING_FORMAT_VERSION};
+use mcap::records::{MessageHeader, Metadata};
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// What the plant passes to [`Recorder::start`].
+#[derive(Debug, Clone)]
+pub struct RecorderConfig {
+    /// The MCAP file to create (parent directories are created).
+    pub path: PathBuf,
+    /// Records the queue holds; at 1 kHz, 4096 absorb a 4 s stall of the writer.
+    pub queue_capacity: usize,
+    /// Uncompressed bytes per chunk: bounds what a SIGKILL loses (about 0.6 s at 1 kHz for 1 MiB).
+    pub chunk_size_bytes: u64,
+    /// Written once as MCAP metadata `rig`: rig name, mode, scenario TOML text, `centreline_z_m`
+    /// (JSON array of the centre-line nodes' z in m, also repeated in every `/strip` message).
+    pub metadata: Vec<(String, String)>,
+}
+
+impl RecorderConfig {
+    pub const DEFAULT_QUEUE_CAPACITY: usize = 4096;
+    pub const DEFAULT_CHUNK_SIZE_BYTES: u64 = 1 << 20;
+
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        Self {
+            path: path.into(),
+            queue_capacity: Self::DEFAULT_QUEUE_CAPACITY,
+            chunk_size_bytes: Self::DEFAULT_CHUNK_SIZE_BYTES,
+            metadata: Vec::new(),
+        }
+    }
+}
+
+/// Writer-thread knobs with sensible defaults (tests shorten them).
+#[derive(Debug, Clone)]
+pub struct RecorderTuning {
+    /// Stop recording (cleanly, with an `/events` entry) when the file system has less free space.
+    pub min_free_bytes: u64,
+    /// Close the open chunk at least this often, so a SIGKILL loses at most this much.
+    pub max_flush_interval: Duration,
+    /// zstd level; 0 is zstd's default (3).
+    pub compression_level: u32,
+    /// Writer sleep when the queue is empty.
+    pub idle_sleep: Duration,
+}
+
+impl Default for RecorderTuning {
+    fn default() -> Self {
+        Self {
+            min_free_bytes: 64 << 20,
+            max_flush_interval: Duration::from_secs(1),
+            compression_level: 0,
+            idle_sleep: Duration::from_millis(2),
+        }
+    }
+}
+
+#[derive(Debug, Error)]
+pub enum RecorderError {
+    #[error("recording {path}: cannot create the file: {source}")]
+    Create { path: PathBuf, source: std::io::Error },
+    #[error("recording {path}: {what}")]
+    Mcap { path: PathBuf, what: String },
+    #[error("recording {path}: {what}")]
+    Config { path: PathBuf, what: String },
+    #[error("recording {path}: the writer thread panicked")]
+    WriterPanicked { path: PathBuf },
+}
+
+/// What [`Recorder::finish`] reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordingSummary {
+    pub path: PathBuf,
+    pub ticks_written: u64,
+    pub events_written: u64,
+    /// Records the queue refused because it was full (must be 0).
+    pub dropped_ticks: u64,
+    pub dropped_events: u64,
+    /// Records drained but not written because the recording had stopped (disk full, I/O error).
+    pub lost_after_stop: u64,
+    /// Why the recording stopped before `finish`, if it did.
+    pub stopped_early: Option<String>,
+    /// Whether the file got its summary, index and footer.
+    pub finalised: bool,
+    /// File size, bytes.
+    pub bytes: u64,
+}
+
+enum Item {
+    Tick(TickRecord),
+    Event(EventRecord),
+}
+
+#[derive(Default)]
+struct Shared {
+    dropped_ticks: AtomicU64,
+    dropped_events: AtomicU64,
+    stopped: AtomicBool,
+}
+
+/// Records every tick of a run into one MCAP file. Owned by the plant's loop thread.
+pub struct Recorder {
+    producer: Option<rtrb::Producer<Item>>,
+    shared: Arc<Shared>,
+    thread: Option<JoinHandle<RecordingSummary>>,
+    path: PathBuf,
+}
+
+type McapFile = mcap::Writer<BufWriter<File>>;
+
+impl Recorder {
+    /// Creates the file, writes header, schemas, channels and metadata, and spawns the writer.
+    /// Call before the loop starts (this does blocking I/O).
+    pub fn start(cfg: RecorderConfig) -> Result<Self, RecorderError> {
+        Self::start_with(cfg, RecorderTuning::default())
+    }
+
+    pub fn start_with(cfg: RecorderConfig, tuning: RecorderTuning) -> Result<Self, RecorderError> {
+        let path = cfg.path.clone();
+        let config_err = |what: String| RecorderError::Config { path: path.clone(), what };
+        if cfg.queue_capacity == 0 {
+            return Err(config_err("queue_capacity must be at least 1".into()));
+        }
+        if cfg.chunk_size_bytes == 0 {
+            return Err(config_err("chunk_size_bytes must be at least 1".into()));
+        }
+        let centreline_z = match cfg.metadata.iter().find(|(k, _)| k == "centreline_z_m") {
+            Some((_, v)) => schema::parse_centreline_z(v).map_err(config_err)?,
+            None => Vec::new(),
+        };
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|source| RecorderError::Create { path: path.clone(), source })?;
+        }
+        let file = File::create(&path).map_err(|source| RecorderError::Create { path: path.clone(), source })?;
+        let mcap_err = |e: mcap::McapError| RecorderError::Mcap { path: path.clone(), what: error_chain(&e) };
+        let mut mcap = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .compression_level(tuning.compression_level)
+            .compression_threads(0)
+            // Chunks end when the writer thread says so (size or age); buffered in memory so the
+            // file never holds a half-built chunk.
+            .chunk_size(None)
+            .disable_seeking(true)
+            .library(format!("rig-recordings {}", env!("CARGO_PKG_VERSION")))
+            .create(BufWriter::with_capacity(1 << 16, file))
+            .map_err(mcap_err)?;
+        let mut channel_ids = [0u16; CHANNELS.len()];
+        for (id, ch) in channel_ids.iter_mut().zip(CHANNELS.iter()) {
+            let schema_id = mcap.add_schema(ch.schema_name, SCHEMA_ENCODING, ch.schema_text.as_bytes()).map_err(mcap_err)?;
+            *id = mcap.add_channel(schema_id, ch.topic, MESSAGE_ENCODING, &BTreeMap::new()).map_err(mcap_err)?;
+        }
+        let mut meta: BTreeMap<String, String> = cfg.metadata.iter().cloned().collect();
+        meta.insert("recording_format".into(), RECORDING_FORMAT_VERSION.to_string());
+        meta.insert("contract_version".into(), messages::CONTRACT_VERSION.to_string());
+        meta.insert("created_wall_ns".into(), wall_clock_ns().to_string());
+        mcap.write_metadata(&Metadata { name: "rig".into(), metadata: meta }).map_err(mcap_err)?;
+        mcap.flush().map_err(mcap_err)?;
+
+        let (producer, consumer) = rtrb::RingBuffer::new(cfg.queue_capacity);
+        let shared = Arc::new(Shared::default());
+        let mut writer = WriterThread {
+            mcap: Some(mcap),
+            channel_ids,
+            buf: Vec::with_capacity(4096),
+            centreline_z,
+            consumer,
+            shared: shared.clone(),
+            tuning,
+            chunk_size: cfg.chunk_size_bytes,
+            path: path.clone(),
+            ticks_written: 0,
+            events_written: 0,
+            lost_after_stop: 0,
+            bytes_since_flush: 0,
+            last_flush: Instant::now(),
+            last_tick: 0,
+            last_sim_time_s: 0.0,
+            stopped_early: None,
+            finalised: false,
+        };
+        let thread = std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || writer.run())
+            .map_err(|source| RecorderError::Create { path: path.clone(), source })?;
+        Ok(Self { producer: Some(producer), shared, thread: Some(thread), path })
+    }
+
+    /// Queues one tick. Wait-free; returns false (and counts a drop) if the queue is full.
+    #[inline]
+    pub fn record_tick(&mut self, r: &TickRecord) -> bool {
+        let Some(p) = self.producer.as_mut() else { return false };
+        if p.push(Item::Tick(*r)).is_ok() {
+            true
+        } else {
+            self.shared.dropped_ticks.fetch_add(1, Ordering::Relaxed);
+            false
+        }
+    }
+
+    /// Queues one event. Wait-free; returns false (and counts a drop) if the queue is full.
+    #[inline]
+    pub fn record_event(&mut self, e: &EventRecord) -> bool {
+        let Some(p) = self.producer.as_mut() else { return false };
+        if p.push(Item::Event(*e)).is_ok() {
+            true
+        } else {
+            self.shared.dropped_events.fetch_add(1, Ordering::Relaxed);
+            false
+        }
+    }
+
+    /// Ticks and events the queue refused so far (must stay 0).
+    pub fn dropped(&self) -> u64 {
+        self.shared.dropped_ticks.load(Ordering::Relaxed) + self.shared.dropped_events.load(Ordering::Relaxed)
+    }
+
+    /// True once the writer stopped recording (disk full or I/O error); the loop may go on.
+    pub fn is_stopped(&self) -> bool {
+        self.shared.stopped.load(Ordering::Relaxed)
+    }
+
+    /// Free slots in the queue (for batch producers that would rather wait than drop).
+    pub fn queue_free(&self) -> usize {
+        self.producer.as_ref().map_or(0, |p| p.slots())
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Drains the queue, writes the drop counters, summary, index and footer, joins the writer.
+    pub fn finish(mut self) -> Result<RecordingSummary, RecorderError> {
+        self.join()
+    }
+
+    fn join(&mut self) -> Result<RecordingSummary, RecorderError> {
+        // Dropping the producer tells the writer that nothing more comes.
+        self.producer = None;
+        match self.thread.take() {
+            Some(t) => t.join().map_err(|_| RecorderError::WriterPanicked { path: self.path.clone() }),
+            None => Err(RecorderError::WriterPanicked { path: self.path.clone() }),
+        }
+    }
+}
+
+impl Drop for Recorder {
+    /// A recorder dropped without `finish` (early return, unwinding) still finalises its file.
+    fn drop(&mut self) {
+        if self.thread.is_some() {
+            if let Err(e) = self.join() {
+                tracing::error!("{e}");
+            }
+        }
+    }
+}
+
+struct WriterThread {
+    mcap: Option<McapFile>,
+    channel_ids: [u16; CHANNELS.len()],
+    buf: Vec<u8>,
+    centreline_z: Vec<f32>,
+    consumer: rtrb::Consumer<Item>,
+    shared: Arc<Shared>,
+    tuning: RecorderTuning,
+    chunk_size: u64,
+    path: PathBuf,
+    ticks_written: u64,
+    events_written: u64,
+    lost_after_stop: u64,
+    bytes_since_flush: u64,
+    last_flush: Instant,
+    last_tick: u64,
+    last_sim_time_s: f64,
+    stopped_early: Option<String>,
+    finalised: bool,
+}
+
+impl WriterThread {
+    fn run(&mut self) -> RecordingSummary {
+        loop {
+            match self.consumer.pop() {
+                Ok(item) => {
+                    self.handle(item);
+                    self.maybe_flush();
+                }
+                Err(_) if self.consumer.is_abandoned() => {
+                    // The producer is gone: everything it pushed is visible now.
+                    while let Ok(item) = self.consumer.pop() {
+                        self.handle(item);
+                        self.maybe_flush();
+                    }
+                    break;
+                }
+                Err(_) => {
+                    self.maybe_flush();
+                    std::thread::sleep(self.tuning.idle_sleep);
+                }
+            }
+        }
+        self.finalise();
+        let finalised = self.finalised;
+        let bytes = std::fs::metadata(&self.path).map(|m| m.len()).unwrap_or(0);
+        RecordingSummary {
+            path: self.path.clone(),
+            ticks_written: self.ticks_written,
+            events_written: self.events_written,
+            dropped_ticks: self.shared.dropped_ticks.load(Ordering::Relaxed),
+            dropped_events: self.shared.dropped_events.load(Ordering::Relaxed),
+            lost_after_stop: self.lost_after_stop,
+            stopped_early: self.stopped_early.clone(),
+            finalised,
+            bytes,
+        }
+    }
+
+    fn handle(&mut self, item: Item) {
+        if self.mcap.is_none() {
+            self.lost_after_stop += 1;
+            return;
+        }
+        let res = match &item {
+            Item::Tick(r) => self.write_tick(r),
+            Item::Event(e) => self.write_event(e),
+        };
+        if let Err(e) = res {
+            self.fail(format!("write failed: {}", error_chain(&e)));
+        }
+    }
+
+    fn write_tick(&mut self, r: &TickRecord) -> Result<(), mcap::McapError> {
+        let log_time = sim_time_ns(r.state.sim_time_s);
+        let publish_time = if r.timing.publish_wall_ns != 0 { r.timing.publish_wall_ns } else { wall_clock_ns() };
+        let dropped = self.shared.dropped_ticks.load(Ordering::Relaxed) + self.shared.dropped_events.load(Ordering::Relaxed);
+        let Self { mcap, channel_ids, buf, centreline_z, bytes_since_flush, .. } = self;
+        let mcap = mcap.as_mut().expect("checked by handle");
+        let mut put = |ch: usize, buf: &Vec<u8>| -> Result<(), mcap::McapError> {
+            *bytes_since_flush += buf.len() as u64 + 31; // + message record header
+            let header = MessageHeader { channel_id: channel_ids[ch], sequence: r.state.tick as u32, log_time, publish_time };
+            mcap.write_to_known_channel(&header, buf)
+        };
+        schema::encode_joint_state(buf, r);
+        put(0, buf)?;
+        schema::encode_joint_torque(buf, r);
+        put(1, buf)?;
+        schema::encode_wrench(buf, r);
+        put(2, buf)?;
+        schema::encode_strip(buf, r, centreline_z);
+        put(3, buf)?;
+        if r.has_diag {
+            schema::encode_controller(buf, r);
+            put(4, buf)?;
+        }
+        schema::encode_timing(buf, r, dropped);
+        put(5, buf)?;
+        self.ticks_written += 1;
+        self.last_tick = r.state.tick;
+        self.last_sim_time_s = r.state.sim_time_s;
+        Ok(())
+    }
+
+    fn write_event(&mut self, e: &EventRecord) -> Result<(), mcap::McapError> {
+        schema::encode_event(&mut self.buf, e);
+        self.bytes_since_flush += self.buf.len() as u64 + 31;
+        let header = MessageHeader {
+            channel_id: self.channel_ids[6],
+            sequence: e.tick as u32,
+            log_time: sim_time_ns(e.sim_time_s),
+            publish_time: e.wall_ns,
+        };
+        self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
+        self.events_written += 1;
+        Ok(())
+    }
+
+    /// Closes the chunk when it is big or old enough, then checks the free disk space.
+    fn maybe_flush(&mut self) {
+        let Some(mcap) = self.mcap.as_mut() else { return };
+        let due = self.bytes_since_flush >= self.chunk_size
+            || (self.bytes_since_flush > 0 && self.last_flush.elapsed() >= self.tuning.max_flush_interval);
+        if !due {
+            return;
+        }
+        if let Err(e) = mcap.flush() {
+            self.fail(format!("write failed: {}", error_chain(&e)));
+            return;
+        }
+        self.bytes_since_flush = 0;
+        self.last_flush = Instant::now();
+        if let Some(free) = free_bytes(&self.path) {
+            if free < self.tuning.min_free_bytes {
+                let why = format!(
+                    "disk almost full: {} MiB free, below the {} MiB reserve; recording stopped at tick {}",
+                    free >> 20,
+                    self.tuning.min_free_bytes >> 20,
+                    self.last_tick
+                );
+                let e = EventRecord::new(self.last_tick, self.last_sim_time_s, EventKind::RecordingError, &why);
+                if let Err(err) = self.write_event(&e) {
+                    self.fail(format!("{why}; and writing the event failed: {}", error_chain(&err)));
+                    return;
+                }
+                tracing::error!(path = %self.path.display(), "{why}; the loop keeps running");
+                self.stopped_early = Some(why);
+                self.shared.stopped.store(true, Ordering::Relaxed);
+                self.finalise();
+            }
+        }
+    }
+
+    /// A hard write error: stop where we are (the file keeps its complete chunks).
+    fn fail(&mut self, why: String) {
+        tracing::error!(
+            path = %self.path.display(),
+            "recording stopped at tick {}: {why}; the file keeps its complete chunks; the loop keeps running",
+            self.last_tick
+        );
+        if let Some(m) = self.mcap.take() {
+            // Not finish(): the summary would go to a failing disk. Drop the stream as is.
+            drop(m.into_inner());
+        }
+        self.stopped_early = Some(why);
+        self.shared.stopped.store(true, Ordering::Relaxed);
+    }
+
+    /// Writes the counters, summary, index and footer. Returns whether the file is finalised.
+    fn finalise(&mut self) -> bool {
+        let Some(mut mcap) = self.mcap.take() else { return false };
+        let mut meta = BTreeMap::new();
+        meta.insert("ticks_written".to_string(), self.ticks_written.to_string());
+        meta.insert("events_written".to_string(), self.events_written.to_string());
+        meta.insert("dropped_ticks".to_string(), self.shared.dropped_ticks.load(Ordering::Relaxed).to_string());
+        meta.insert("dropped_events".to_string(), self.shared.dropped_events.load(Ordering::Relaxed).to_string());
+        meta.insert("last_tick".to_string(), self.last_tick.to_string());
+        meta.insert("stopped_early".to_string(), self.stopped_early.clone().unwrap_or_default());
+        meta.insert("finished_wall_ns".to_string(), wall_clock_ns().to_string());
+        let res = mcap
+            .write_metadata(&Metadata { name: "recording_summary".into(), metadata: meta })
+            .and_then(|_| mcap.finish().map(|_| ()))
+            .and_then(|_| {
+                use std::io::Write;
+                mcap.into_inner().flush().map_err(mcap::McapError::from)
+            });
+        match res {
+            Ok(()) => {
+                self.finalised = true;
+                true
+            }
+            Err(e) => {
+                let e = error_chain(&e);
+                tracing::error!(path = %self.path.display(), "finalising the recording failed: {e}");
+                if self.stopped_early.is_none() {
+                    self.stopped_early = Some(format!("finalising failed: {e}"));
+                }
+                false
+            }
+        }
+    }
+}
+
+/// Free bytes for unprivileged users on the file system holding `path`.
+fn free_bytes(path: &Path) -> Option<u64> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = std::ffi::CString::new(path.as_os_str().as_bytes()).ok()?;
+    let mut s: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: c is NUL-terminated, s is a valid statvfs to fill.
+    if unsafe { libc::statvfs(c.as_ptr(), &mut s) } != 0 {
+        return None;
+    }
+    Some(s.f_bavail as u64 * s.f_frsize as u64)
+}
+
+/// An error with its sources, `outer: inner: ...` (mcap's I/O error hides the OS error otherwise).
+pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut cur = e.source();
+    while let Some(c) = cur {
+        s.push_str(": ");
+        s.push_str(&c.to_string());
+        cur = c.source();
+    }
+    s
+}

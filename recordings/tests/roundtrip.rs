@@ -1,0 +1,163 @@
+//! Writer -> file -> reader, without daemons: every tick on every channel, truncated files,
+//! foreign files, a disk running low.
+
+use recordings::read::{ReadError, Recording};
+use recordings::synthetic::SyntheticRun;
+use recordings::{EventKind, Recorder, RecorderConfig, RecorderTuning};
+use std::path::PathBuf;
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("recordings-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn small_chunks(path: &PathBuf, run: &SyntheticRun) -> RecorderConfig {
+    let mut cfg = RecorderConfig::new(path);
+    cfg.chunk_size_bytes = 64 << 10;
+    cfg.metadata = run.metadata();
+    cfg
+}
+
+#[test]
+fn every_tick_on_every_channel_reads_back_exactly() {
+    let run = SyntheticRun::default();
+    let path = tmp("full.mcap");
+    let summary = run.record(small_chunks(&path, &run)).unwrap();
+    assert!(summary.finalised, "{summary:?}");
+    assert_eq!((summary.ticks_written, summary.events_written, summary.dropped_ticks), (run.ticks, 4, 0));
+    assert_eq!(summary.bytes, std::fs::metadata(&path).unwrap().len());
+
+    let rec = Recording::open_complete(&path).unwrap();
+    assert_eq!(rec.check_continuity().unwrap(), 0..=run.ticks - 1);
+    assert_eq!(rec.joint_state.len() as u64, run.ticks);
+    assert_eq!(rec.controller.len() as u64, run.ticks);
+    assert_eq!(rec.dropped(), 0);
+    assert_eq!(rec.summary_metadata("ticks_written"), Some(run.ticks.to_string().as_str()));
+    assert_eq!(rec.rig_metadata("rig"), Some("synthetic"));
+    assert_eq!(rec.centreline_z_m(), run.centreline_z_m());
+    for k in [0u64, 1, 777, run.ticks - 1] {
+        let want = run.tick(k);
+        let i = k as usize;
+        assert_eq!(rec.joint_state[i], want.state);
+        assert_eq!(rec.wrench[i], want.wrench);
+        assert_eq!(rec.joint_torque[i].torque, want.torque);
+        assert_eq!(rec.joint_torque[i].held, want.torque_held);
+        assert_eq!(rec.controller[i], want.diag);
+        assert_eq!(rec.timing[i].timing, want.timing);
+        assert_eq!(rec.log_time_ns[i], k * 1_000_000, "log time = simulated time in ns");
+        let s = &rec.strip[i];
+        assert_eq!(s.wheel_z_m, want.strip.wheel_z_m);
+        assert_eq!(s.bottom_force_n, want.strip.bottom_force_n);
+        let p: Vec<f32> = want.strip.centreline().iter().map(|&p| p as f32).collect();
+        assert_eq!(s.centreline_pressure_pa, p);
+    }
+    let kinds: Vec<_> = rec.events.iter().map(|e| e.kind.unwrap()).collect();
+    assert_eq!(kinds, [EventKind::Start, EventKind::SafeStop, EventKind::SafeStopCleared, EventKind::Stop]);
+    assert_eq!(rec.events[1].text, "synthetic safe stop");
+}
+
+#[test]
+fn a_cut_file_gives_its_complete_chunks_and_a_clear_error_when_strict() {
+    let run = SyntheticRun { ticks: 2000, ..Default::default() };
+    let path = tmp("cut-source.mcap");
+    run.record(small_chunks(&path, &run)).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let full = Recording::open(&path).unwrap();
+    let mut recovered = Vec::new();
+    for frac in [0.02, 0.25, 0.5, 0.75, 0.97] {
+        let cut = (bytes.len() as f64 * frac) as usize;
+        let p = tmp(&format!("cut-{cut}.mcap"));
+        std::fs::write(&p, &bytes[..cut]).unwrap();
+        let rec = Recording::open(&p).unwrap();
+        let why = rec.truncated.as_deref().unwrap_or_else(|| panic!("cut at {cut} not reported"));
+        assert!(!why.is_empty());
+        if !rec.joint_state.is_empty() {
+            // A prefix of the run, whole ticks only, identical to the uncut file.
+            let range = rec.check_continuity().unwrap();
+            assert_eq!(*range.start(), 0);
+            let n = rec.joint_state.len();
+            assert_eq!(rec.joint_state[..], full.joint_state[..n]);
+            assert_eq!(rec.strip[n - 1], full.strip[n - 1]);
+        }
+        recovered.push(rec.joint_state.len());
+        let err = Recording::open_complete(&p).unwrap_err();
+        assert!(matches!(err, ReadError::Truncated { .. }), "{err}");
+        let msg = err.to_string();
+        assert!(msg.contains("truncated") && msg.contains(&p.display().to_string()), "{msg}");
+    }
+    // Later cuts recover at least as much, and most of the run survives a cut near the end.
+    assert!(recovered.windows(2).all(|w| w[0] <= w[1]), "{recovered:?}");
+    assert!(recovered[3] > 0 && recovered[4] as u64 > run.ticks / 2, "{recovered:?}");
+}
+
+#[test]
+fn a_non_mcap_file_is_refused_by_name() {
+    let p = tmp("notes.txt");
+    std::fs::write(&p, "time,force\n0,1\n").unwrap();
+    let err = Recording::open(&p).unwrap_err();
+    assert!(matches!(err, ReadError::NotMcap { .. }));
+    let msg = err.to_string();
+    assert!(msg.contains("not an MCAP recording") && msg.contains("notes.txt"), "{msg}");
+    let empty = tmp("empty.mcap");
+    std::fs::write(&empty, b"").unwrap();
+    assert!(matches!(Recording::open(&empty), Err(ReadError::NotMcap { .. })));
+    let missing = tmp("does-not-exist.mcap");
+    let msg = Recording::open(&missing).unwrap_err().to_string();
+    assert!(msg.contains("does-not-exist.mcap"), "{msg}");
+}
+
+#[test]
+fn an_mcap_file_of_someone_else_is_refused() {
+    let p = tmp("foreign.mcap");
+    let mut w = mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(&p).unwrap())).unwrap();
+    let sid = w.add_schema("std_msgs/msg/String", "ros2msg", b"string data").unwrap();
+    let cid = w.add_channel(sid, "/chatter", "cdr", &Default::default()).unwrap();
+    let header = mcap::records::MessageHeader { channel_id: cid, sequence: 0, log_time: 0, publish_time: 0 };
+    w.write_to_known_channel(&header, &[0, 1, 0, 0, 3, 0, 0, 0, b'h', b'i', 0]).unwrap();
+    w.finish().unwrap();
+    drop(w);
+    let msg = Recording::open(&p).unwrap_err().to_string();
+    assert!(msg.contains("not a rig recording") && msg.contains("/joint_state"), "{msg}");
+}
+
+#[test]
+fn a_disk_running_low_ends_the_recording_cleanly_and_the_loop_never_blocks() {
+    let run = SyntheticRun { ticks: 1500, ..Default::default() };
+    let path = tmp("low-disk.mcap");
+    let cfg = small_chunks(&path, &run);
+    // A reserve no disk has: the first chunk close finds the disk "full".
+    let tuning = RecorderTuning { min_free_bytes: u64::MAX, ..Default::default() };
+    let mut rec = Recorder::start_with(cfg, tuning).unwrap();
+    let mut accepted = 0;
+    for k in 0..run.ticks {
+        while rec.queue_free() == 0 {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        accepted += rec.record_tick(&run.tick(k)) as u64;
+    }
+    let summary = rec.finish().unwrap();
+    assert_eq!(accepted, run.ticks, "the queue kept accepting after the stop");
+    assert_eq!(summary.dropped_ticks, 0);
+    let why = summary.stopped_early.clone().expect("stop reported");
+    assert!(why.contains("disk almost full"), "{why}");
+    assert!(summary.finalised, "a low disk still gets summary and footer");
+    assert_eq!(summary.ticks_written + summary.lost_after_stop, run.ticks);
+    assert!(summary.ticks_written > 0 && summary.lost_after_stop > 0, "{summary:?}");
+
+    let back = Recording::open_complete(&path).unwrap();
+    assert_eq!(back.joint_state.len() as u64, summary.ticks_written);
+    back.check_continuity().unwrap();
+    let ev: Vec<_> = back.events_of(EventKind::RecordingError).collect();
+    assert_eq!(ev.len(), 1);
+    assert!(ev[0].text.contains("disk almost full"), "{}", ev[0].text);
+    assert_eq!(ev[0].tick, summary.ticks_written - 1);
+}
+
+#[test]
+fn an_unwritable_target_is_a_clear_start_error() {
+    // /dev/full answers every write with ENOSPC.
+    let err = Recorder::start(RecorderConfig::new("/dev/full")).err().expect("start must fail");
+    let msg = err.to_string();
+    assert!(msg.contains("/dev/full") && msg.to_lowercase().contains("no space"), "{msg}");
+}
