@@ -2,6 +2,7 @@
 //! hybrid impedance / inverse dynamics law, the gain design rule and the 1 kHz daemon loop.
 //! It links the robot model but never the strip model or the plant.
 
+pub mod daemon;
 pub mod gains;
 pub mod law;
 pub mod model;

@@ -1,1 +1,47 @@
-fn main() {}
+//! `controller --rig NAME --scenario FILE`: the force controller daemon (see `controller::daemon`).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+
+#[derive(Debug, Parser)]
+#[command(name = "controller", about = "Hybrid impedance force controller daemon of the weatherstrip rig")]
+struct Args {
+    /// Rig name (the service prefix shared with plant-sim).
+    #[arg(long)]
+    rig: String,
+    /// Scenario TOML file (references, gains, robot model).
+    #[arg(long)]
+    scenario: PathBuf,
+    /// Testing only: pretend to speak this contract version.
+    #[arg(long, hide = true)]
+    contract_version: Option<u32>,
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .with_writer(std::io::stderr)
+        .init();
+    let args = Args::parse();
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{e:#}");
+            eprintln!("controller: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: &Args) -> anyhow::Result<()> {
+    messages::services::validate_rig_name(&args.rig).map_err(anyhow::Error::msg)?;
+    let scenario = scenario::Scenario::load(&args.scenario)?;
+    let mut cfg = controller::daemon::DaemonConfig::new(&args.rig, scenario);
+    if let Some(v) = args.contract_version {
+        cfg.contract_version = v;
+    }
+    controller::daemon::run(&cfg)?;
+    Ok(())
+}

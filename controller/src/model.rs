@@ -10,9 +10,10 @@ use scenario::Scenario;
 pub const STRIP_TOP_HEIGHT_M: f64 = 0.008;
 
 /// The tool of the scenario: mass, TCP offset and wheel radius from `scenario.robot`; inertia of
-/// the documented default tool scaled with the mass. As in `robot::Tool` and the plant
-/// (`plant_sim::physics::tool_from_scenario`, the same rule: both sides must agree), the TCP is the
-/// wheel's lowest point when the tool points down, `robot.tool_offset_m` along flange z.
+/// the documented default tool scaled with the mass. As the scenario field says and the plant
+/// does (`plant_sim::physics::tool_from_scenario`, the same rule: both sides must agree), the TCP
+/// is the wheel centre, `robot.tool_offset_m` along flange z; the wheel's lowest point lies one
+/// radius below it when the tool points down.
 pub fn tool_from_scenario(s: &Scenario) -> Tool {
     let default = Tool::default();
     let scale = if default.mass_kg > 0.0 { s.robot.tool_mass_kg / default.mass_kg } else { 1.0 };

@@ -6,7 +6,7 @@
 //! z_start → z_end with a cosine velocity profile → force ramp-down to 0 → lift-off (position
 //! control along y back above the strip) → done (hold).
 //!
-//! Positions are of the TCP (the wheel's lowest point, the nominal contact point). All time profiles are C¹ (position and velocity
+//! Positions are of the TCP (the wheel centre, one wheel radius above the contact point). All time profiles are C¹ (position and velocity
 //! continuous) so the PD feed-forward never sees steps.
 
 use nalgebra::Vector3;
@@ -64,13 +64,15 @@ pub struct ReferenceParams {
 }
 
 impl ReferenceParams {
-    /// From the scenario: the wheel's lowest point (the TCP) starts `approach_height_mm` above
-    /// the nominal strip top at `z_start_mm`, centred on the strip (the plant's start pose).
+    /// From the scenario: the wheel's lowest point starts `approach_height_mm` above the nominal
+    /// strip top at `z_start_mm`, centred on the strip (the plant's start pose); the TCP is the
+    /// wheel centre, one radius higher.
     pub fn from_scenario(s: &Scenario) -> ReferenceParams {
         let t = &s.trajectory;
+        let r = s.robot.wheel_radius_mm * 1e-3;
         let z_start_m = t.z_start_mm * 1e-3;
         ReferenceParams {
-            start_task_m: Vector3::new(0.0, STRIP_TOP_HEIGHT_M + t.approach_height_mm * 1e-3, z_start_m),
+            start_task_m: Vector3::new(0.0, STRIP_TOP_HEIGHT_M + t.approach_height_mm * 1e-3 + r, z_start_m),
             settle_s: t.settle_s,
             approach_speed_mps: t.approach_speed_mm_s * 1e-3,
             approach_ramp_s: 0.05,
@@ -82,7 +84,7 @@ impl ReferenceParams {
             z_end_m: t.z_end_mm * 1e-3,
             roll_s: t.roll_s,
             ramp_down_s: t.ramp_down_s,
-            lift_y_m: STRIP_TOP_HEIGHT_M + t.lift_mm * 1e-3,
+            lift_y_m: STRIP_TOP_HEIGHT_M + t.lift_mm * 1e-3 + r,
             lift_s: t.lift_s,
         }
     }

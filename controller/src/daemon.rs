@@ -1,0 +1,262 @@
+//! The controller process loop (DESIGN section 6): wait on the plant's state event (ppoll on the
+//! listener's fd, no busy polling), read the newest state and wrench, compute the law, publish
+//! torque + diagnostics, notify. Per tick: no allocation, no logging, no locks.
+//!
+//! Exits: `Ok` when the plant says `ShuttingDown`; an error (non-zero exit) on a contract version
+//! mismatch (the message names both versions), when no state arrives within
+//! [`DaemonConfig::startup_timeout`] of starting, or when the plant falls silent for
+//! [`DaemonConfig::dead_plant_timeout`] after having been seen.
+
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use messages::ports::{ControllerPorts, Wake};
+use messages::{
+    check_version, ControllerDiagnostics, ControllerStatus, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame,
+};
+use nalgebra::{Matrix3, Vector3};
+use robot::Vec6;
+use scenario::Scenario;
+
+use crate::gains::Gains;
+use crate::law::ControlLaw;
+use crate::model::{controller_robot, tool_down_rotation, TaskFrame};
+use crate::reference::{ReferenceGenerator, ReferenceParams};
+
+/// How the daemon runs.
+#[derive(Clone, Debug)]
+pub struct DaemonConfig {
+    pub rig: String,
+    pub scenario: Scenario,
+    /// Contract version this process speaks (normally `messages::CONTRACT_VERSION`; the hidden
+    /// `--contract-version` flag lets tests pretend another one).
+    pub contract_version: u32,
+    /// Longest wait for the first state, s.
+    pub startup_timeout: Duration,
+    /// Longest silence of the plant after the first state.
+    pub dead_plant_timeout: Duration,
+    /// SCHED_FIFO priority to request.
+    pub rt_priority: i32,
+}
+
+impl DaemonConfig {
+    pub fn new(rig: &str, scenario: Scenario) -> Self {
+        DaemonConfig {
+            rig: rig.to_string(),
+            scenario,
+            contract_version: messages::CONTRACT_VERSION,
+            startup_timeout: Duration::from_secs(10),
+            dead_plant_timeout: Duration::from_millis(100),
+            rt_priority: 80,
+        }
+    }
+}
+
+/// Summary of a finished run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DaemonSummary {
+    pub ticks_answered: u64,
+    pub last_tick: u64,
+    pub max_compute_ns: u64,
+    pub mean_compute_ns: f64,
+}
+
+/// Timer slack 1 ns, SCHED_FIFO and mlockall when permitted; each outcome logged once.
+fn setup_realtime(priority: i32) {
+    // SAFETY: plain syscalls on the calling thread/process with valid arguments.
+    let (slack, fifo, lock) = unsafe {
+        let slack = libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) == 0;
+        let param = libc::sched_param { sched_priority: priority };
+        let fifo = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param);
+        let lock = libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0;
+        (slack, fifo, lock)
+    };
+    if !slack {
+        tracing::warn!("could not lower the timer slack to 1 ns");
+    }
+    if fifo == 0 {
+        tracing::info!(priority, "SCHED_FIFO enabled");
+    } else {
+        tracing::warn!(
+            priority,
+            error = %std::io::Error::from_raw_os_error(fifo),
+            "SCHED_FIFO not permitted (needs CAP_SYS_NICE or an rtprio limit); running with the default scheduler"
+        );
+    }
+    if !lock {
+        tracing::warn!("mlockall not permitted (memlock limit); pages may fault on the first ticks");
+    }
+}
+
+/// Measured wrench on the tool in base axes at the TCP, (force, torque) as one 6-vector.
+fn wrench_on_tool_base(w: &Wrench, rot_base_tool: &Matrix3<f64>) -> Vec6 {
+    let f = Vector3::from(w.force);
+    let m = Vector3::from(w.torque);
+    let (f, m) = if w.frame == WrenchFrame::SensorAtTcp as u32 { (rot_base_tool * f, rot_base_tool * m) } else { (f, m) };
+    Vec6::new(f.x, f.y, f.z, m.x, m.y, m.z)
+}
+
+/// Task-space mass of the controller's model along the task normal at `q`:
+/// 1 / (n_yᵀ J M⁻¹ Jᵀ n_y) — the wheel's effective mass the gain rule reports.
+pub fn effective_normal_mass(law: &ControlLaw, q: &Vec6) -> f64 {
+    let robot = law.robot();
+    let j = robot.jacobian_tcp(q);
+    let m = robot.mass_matrix(q);
+    let n = law.task().vector_to_base(&Vector3::new(0.0, 1.0, 0.0));
+    let jn = j.transpose() * Vec6::new(n.x, n.y, n.z, 0.0, 0.0, 0.0);
+    match m.cholesky() {
+        Some(c) => 1.0 / jn.dot(&c.solve(&jn)),
+        None => f64::NAN,
+    }
+}
+
+fn controller_id(pid: u32) -> u64 {
+    let nonce = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
+    (u64::from(pid) << 32) | u64::from(nonce)
+}
+
+/// Run the controller until the plant shuts down (Ok) or a fault (Err, non-zero exit).
+pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
+    let s = &cfg.scenario;
+    let ports = ControllerPorts::open(&cfg.rig, "controller").with_context(|| format!("controller for rig {:?}", cfg.rig))?;
+    let task = TaskFrame::from_scenario(s);
+    let robot = controller_robot(s);
+    let mut law = ControlLaw::new(robot, task, Gains::from_scenario(s, f64::NAN), tool_down_rotation());
+    let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
+    let id = controller_id(std::process::id());
+    setup_realtime(cfg.rt_priority);
+    tracing::info!(rig = %cfg.rig, contract_version = cfg.contract_version, "controller waiting for the plant");
+
+    let started = Instant::now();
+    let mut last_state_at: Option<Instant> = None;
+    let mut last_tick: Option<u64> = None;
+    let mut wrench = Wrench { contract_version: cfg.contract_version, frame: WrenchFrame::BaseAtTcp as u32, tick: 0, force: [0.0; 3], torque: [0.0; 3] };
+    let mut summary = DaemonSummary::default();
+    let mut compute_sum_ns: u128 = 0;
+
+    loop {
+        let deadline = match last_state_at {
+            Some(t) => t + cfg.dead_plant_timeout,
+            None => started + cfg.startup_timeout,
+        };
+        let wake = ports.wait_state(deadline);
+        let woke = Instant::now();
+        let state = if wake == Wake::Timeout {
+            // A notification may have been consumed while we computed: one last look.
+            match ports.receive_state() {
+                Some(st) => st,
+                None => match last_tick {
+                    Some(t) => bail!(
+                        "rig {:?}: no joint state for {} ms after tick {t}: the plant died or stalled; exiting",
+                        cfg.rig,
+                        cfg.dead_plant_timeout.as_millis()
+                    ),
+                    None => bail!(
+                        "rig {:?}: no joint state within {:.1} s of starting: is plant-sim running on this rig?",
+                        cfg.rig,
+                        cfg.startup_timeout.as_secs_f64()
+                    ),
+                },
+            }
+        } else {
+            match ports.receive_state() {
+                Some(st) => st,
+                None => continue,
+            }
+        };
+        last_state_at = Some(woke);
+        if handle_state_or_exit(cfg, &state)? {
+            summary.mean_compute_ns = if summary.ticks_answered > 0 { compute_sum_ns as f64 / summary.ticks_answered as f64 } else { 0.0 };
+            tracing::info!(
+                ticks = summary.ticks_answered,
+                last_tick = summary.last_tick,
+                max_compute_us = summary.max_compute_ns as f64 * 1e-3,
+                mean_compute_us = summary.mean_compute_ns * 1e-3,
+                "plant shutting down; controller exits"
+            );
+            return Ok(summary);
+        }
+        if let Some(w) = ports.receive_wrench() {
+            check_version(cfg.contract_version, w.contract_version, "wrench").map_err(anyhow::Error::from)?;
+            wrench = w;
+        }
+        if last_tick.is_some_and(|t| state.tick <= t) {
+            continue; // already answered
+        }
+        let q = Vec6::from(state.q);
+        let qd = Vec6::from(state.qd);
+        if last_tick.is_none() {
+            // First state: start the references from here (a take-over of a running plant starts
+            // its own run) and report the design.
+            reference.reset(state.sim_time_s);
+            let mut g = *law.gains();
+            g.force.effective_mass_kg = effective_normal_mass(&law, &q);
+            g.force.contact_resonance_hz =
+                (g.force.strip_stiffness_n_per_m / g.force.effective_mass_kg).sqrt() / std::f64::consts::TAU;
+            law = ControlLaw::new(law.robot().clone(), *law.task(), g, tool_down_rotation());
+            tracing::info!(
+                tick = state.tick,
+                k_s = g.force.strip_stiffness_n_per_m,
+                m_d = g.force.m_d_kg,
+                b_d = g.force.b_d_nspm,
+                k_i = g.force.k_i_per_s,
+                m_eff = g.force.effective_mass_kg,
+                predicted_pm_deg = g.force.predicted_phase_margin_deg,
+                "first state; force gains from the design rule"
+            );
+        }
+        let (tau, diag) = step(&mut law, &mut reference, &state, &wrench, &q, &qd, cfg.contract_version);
+        let mut diag = diag;
+        let compute_ns = woke.elapsed().as_nanos() as u64;
+        diag.compute_time_ns = compute_ns;
+        let torque = JointTorque {
+            contract_version: cfg.contract_version,
+            controller_status: if tau.iter().all(|x| x.is_finite()) { ControllerStatus::Active as u32 } else { ControllerStatus::Fault as u32 },
+            tick: state.tick,
+            controller_id: id,
+            tau: tau.into(),
+        };
+        ports.publish(&torque, Some(&diag)).with_context(|| format!("rig {:?}: publish torque of tick {}", cfg.rig, state.tick))?;
+        last_tick = Some(state.tick);
+        summary.ticks_answered += 1;
+        summary.last_tick = state.tick;
+        summary.max_compute_ns = summary.max_compute_ns.max(compute_ns);
+        compute_sum_ns += u128::from(compute_ns);
+    }
+}
+
+/// Version check and shutdown detection of one state: Ok(true) = the plant shuts down.
+fn handle_state_or_exit(cfg: &DaemonConfig, st: &JointState) -> anyhow::Result<bool> {
+    check_version(cfg.contract_version, st.contract_version, "joint state").map_err(anyhow::Error::from)?;
+    Ok(PlantStatus::from_u32(st.plant_status) == Some(PlantStatus::ShuttingDown))
+}
+
+/// One control step (allocation-free): references, law, diagnostics.
+pub fn step(
+    law: &mut ControlLaw,
+    reference: &mut ReferenceGenerator,
+    state: &JointState,
+    wrench: &Wrench,
+    q: &Vec6,
+    qd: &Vec6,
+    contract_version: u32,
+) -> (Vec6, ControllerDiagnostics) {
+    let kin = law.kinematics(q, qd);
+    let w = wrench_on_tool_base(wrench, &kin.rot_base_tool);
+    let force_y = law.strip_force_y(&Vector3::new(w[0], w[1], w[2]));
+    let r = reference.update(state.sim_time_s, force_y, kin.pos_task_m.y);
+    let out = law.compute(q, qd, &kin, &w, &r, state.period_s);
+    let diag = ControllerDiagnostics {
+        contract_version,
+        force_control_active: u32::from(r.force_mode),
+        tick: state.tick,
+        force_ref_n: r.force_y_n,
+        force_meas_n: out.force_meas_n,
+        pos_ref_task_m: r.pos_m.into(),
+        pos_err_task_m: out.pos_err_task_m.into(),
+        rot_err_task_rad: out.rot_err_task_rad.into(),
+        force_integral_ns: out.force_integral_ns,
+        compute_time_ns: 0,
+    };
+    (out.tau, diag)
+}

@@ -1,0 +1,117 @@
+//! The daemon against an in-process fake plant (messages::ports::PlantPorts): it answers every
+//! tick with the tick's number, exits cleanly on ShuttingDown, and exits with an error naming
+//! both versions on a contract mismatch and when the plant falls silent.
+
+use std::thread;
+use std::time::{Duration, Instant};
+
+use controller::daemon::{run, DaemonConfig};
+use messages::ports::{PlantPorts, Wake};
+use messages::{JointState, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
+use scenario::Scenario;
+
+fn unique_rig(tag: &str) -> String {
+    let n = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos();
+    format!("ctl-{tag}-{}-{}", std::process::id(), n % 1_000_000_000)
+}
+
+fn start_q() -> [f64; 6] {
+    // IK of the scenario start pose with the controller's own model.
+    let s = Scenario::default();
+    let robot = controller::model::controller_robot(&s);
+    let task = controller::model::TaskFrame::from_scenario(&s);
+    let p = controller::reference::ReferenceParams::from_scenario(&s);
+    let b = task.point_to_base(&p.start_task_m);
+    robot.ik_tcp(&robot::scenario_tcp_pose(b.x, b.y, b.z), &robot::scenario_ik_seed()).unwrap().into()
+}
+
+fn state(tick: u64, status: PlantStatus, q: [f64; 6]) -> JointState {
+    JointState {
+        contract_version: CONTRACT_VERSION,
+        plant_status: status as u32,
+        tick,
+        sim_time_s: tick as f64 * 1e-3,
+        q,
+        qd: [0.0; 6],
+        tau_applied: [0.0; 6],
+        period_s: 1e-3,
+        flags: 0,
+        consecutive_misses: 0,
+        total_misses: 0,
+    }
+}
+
+fn wrench(tick: u64) -> Wrench {
+    Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick, force: [0.0; 3], torque: [0.0; 3] }
+}
+
+fn spawn(rig: &str, version: u32, dead: Duration) -> thread::JoinHandle<anyhow::Result<controller::daemon::DaemonSummary>> {
+    let mut cfg = DaemonConfig::new(rig, Scenario::default());
+    cfg.contract_version = version;
+    cfg.startup_timeout = Duration::from_secs(5);
+    cfg.dead_plant_timeout = dead;
+    thread::spawn(move || run(&cfg))
+}
+
+/// Publish until the controller's ports exist and it answers tick 0.
+fn lockstep_ticks(plant: &PlantPorts, n: u64, q: [f64; 6]) -> Vec<messages::JointTorque> {
+    let mut out = Vec::new();
+    for tick in 0..n {
+        let t_end = Instant::now() + Duration::from_secs(5);
+        loop {
+            plant.publish(&state(tick, PlantStatus::Running, q), &wrench(tick)).unwrap();
+            if plant.wait_torque(Instant::now() + Duration::from_millis(50)) == Wake::Notified {
+                if let Some(t) = plant.receive_torque_for(tick) {
+                    out.push(t);
+                    break;
+                }
+            }
+            assert!(Instant::now() < t_end, "no answer for tick {tick}");
+        }
+    }
+    out
+}
+
+#[test]
+fn answers_every_tick_and_exits_on_shutdown() {
+    let rig = unique_rig("ok");
+    let plant = PlantPorts::open(&rig, "fake-plant").unwrap();
+    let h = spawn(&rig, CONTRACT_VERSION, Duration::from_secs(5));
+    let q = start_q();
+    let torques = lockstep_ticks(&plant, 20, q);
+    assert_eq!(torques.len(), 20);
+    // At rest at the start pose with no wrench: gravity compensation of the controller's model.
+    let s = Scenario::default();
+    let g = controller::model::controller_robot(&s).gravity_torque(&robot::Vec6::from(q));
+    let tau = robot::Vec6::from(torques[0].tau);
+    assert!((tau - g).norm() < 1e-6 * g.norm(), "{tau} vs {g}");
+    assert!(plant.receive_diagnostics().is_some());
+    plant.publish(&state(20, PlantStatus::ShuttingDown, q), &wrench(20)).unwrap();
+    let summary = h.join().unwrap().expect("clean exit on ShuttingDown");
+    assert_eq!(summary.ticks_answered, 20);
+}
+
+#[test]
+fn version_mismatch_exits_with_both_versions() {
+    let rig = unique_rig("ver");
+    let plant = PlantPorts::open(&rig, "fake-plant").unwrap();
+    let h = spawn(&rig, CONTRACT_VERSION + 7, Duration::from_secs(5));
+    let t_end = Instant::now() + Duration::from_secs(5);
+    while !h.is_finished() && Instant::now() < t_end {
+        plant.publish(&state(0, PlantStatus::Running, start_q()), &wrench(0)).unwrap();
+        thread::sleep(Duration::from_millis(20));
+    }
+    let e = h.join().unwrap().unwrap_err().to_string();
+    assert!(e.contains(&format!("version {}", CONTRACT_VERSION)) && e.contains(&format!("version {}", CONTRACT_VERSION + 7)), "{e}");
+}
+
+#[test]
+fn silent_plant_is_detected_after_having_been_seen() {
+    let rig = unique_rig("dead");
+    let plant = PlantPorts::open(&rig, "fake-plant").unwrap();
+    let h = spawn(&rig, CONTRACT_VERSION, Duration::from_millis(100));
+    lockstep_ticks(&plant, 3, start_q());
+    // Then silence.
+    let e = h.join().unwrap().unwrap_err().to_string();
+    assert!(e.contains("no joint state for 100 ms after tick 2"), "{e}");
+}
