@@ -1,10 +1,12 @@
 //! Rigid-body dynamics of (7.1), `M(q) qdd + C(q, qd) qd + g(q) = tau` (external wrench left to
-//! the caller as `J^T F_e`): recursive Newton-Euler, composite rigid body algorithm, forward
-//! dynamics by CRBA + Cholesky. Spatial quantities in base axes about the base origin.
+//! the caller as `J^T F_e`): recursive Newton-Euler (in link frames, [`crate::newton_euler`]),
+//! composite rigid body algorithm (spatial inertias in base axes about the base origin),
+//! forward dynamics by CRBA + Cholesky.
 
 use crate::kinematics::Frames;
 use crate::model::Robot;
-use crate::spatial::{cross_force, SpatialInertia, V3};
+use crate::newton_euler::sin_cos;
+use crate::spatial::{SpatialInertia, V3};
 use crate::{Mat6, Vec6};
 
 impl Robot {
@@ -18,60 +20,22 @@ impl Robot {
         out
     }
 
-    /// Recursive Newton-Euler core: rigid-body torques for `(qd, qdd)` with the base accelerating
-    /// at `gravity_mps2` upwards (the usual trick for gravity). No armature, no friction.
-    #[inline(always)]
-    fn rnea_core(&self, frames: &Frames, inertias: &[SpatialInertia; 6], qd: &Vec6, qdd: &Vec6, gravity_mps2: f64) -> Vec6 {
-        let (mut vw, mut vv) = (V3::zeros(), V3::zeros());
-        let (mut aw, mut av) = (V3::zeros(), V3::new(0.0, 0.0, gravity_mps2));
-        let mut axes = [(V3::zeros(), V3::zeros()); 6];
-        let mut forces = [(V3::zeros(), V3::zeros()); 6];
-        for i in 0..6 {
-            let z = frames.joint_axis(i);
-            let sv = frames.pos[i].cross(&z);
-            vw += z * qd[i];
-            vv += sv * qd[i];
-            aw += z * qdd[i] + vw.cross(&z) * qd[i];
-            av += sv * qdd[i] + (vw.cross(&sv) + vv.cross(&z)) * qd[i];
-            let inertia = &inertias[i];
-            let (n_a, f_a) = inertia.apply(&aw, &av);
-            let (n_v, f_v) = inertia.apply(&vw, &vv);
-            let (n_c, f_c) = cross_force(&vw, &vv, &n_v, &f_v);
-            forces[i] = (n_a + n_c, f_a + f_c);
-            axes[i] = (z, sv);
-        }
-        let mut tau = Vec6::zeros();
-        let (mut n, mut f) = (V3::zeros(), V3::zeros());
-        for i in (0..6).rev() {
-            n += forces[i].0;
-            f += forces[i].1;
-            tau[i] = axes[i].0.dot(&n) + axes[i].1.dot(&f);
-        }
-        tau
-    }
-
     /// Inverse dynamics (7.1) without external wrench: `M qdd + C qd + g + armature qdd +
     /// viscous qd`.
     pub fn rnea(&self, q: &Vec6, qd: &Vec6, qdd: &Vec6) -> Vec6 {
-        let frames = self.frames(q);
-        let inertias = self.body_inertias(&frames);
-        self.rnea_core(&frames, &inertias, qd, qdd, Self::GRAVITY_MPS2)
+        self.rnea_local(&sin_cos(q), qd, qdd, Self::GRAVITY_MPS2)
             + self.armature.component_mul(qdd)
             + self.viscous.component_mul(qd)
     }
 
     /// Gravity torque `g(q)` of (7.1).
     pub fn gravity_torque(&self, q: &Vec6) -> Vec6 {
-        let frames = self.frames(q);
-        let inertias = self.body_inertias(&frames);
-        self.rnea_core(&frames, &inertias, &Vec6::zeros(), &Vec6::zeros(), Self::GRAVITY_MPS2)
+        self.rnea_local(&sin_cos(q), &Vec6::zeros(), &Vec6::zeros(), Self::GRAVITY_MPS2)
     }
 
     /// Coriolis and centrifugal torque `C(q, qd) qd` of (7.1) (no friction).
     pub fn coriolis(&self, q: &Vec6, qd: &Vec6) -> Vec6 {
-        let frames = self.frames(q);
-        let inertias = self.body_inertias(&frames);
-        self.rnea_core(&frames, &inertias, qd, &Vec6::zeros(), 0.0)
+        self.rnea_local(&sin_cos(q), qd, &Vec6::zeros(), 0.0)
     }
 
     /// Viscous friction torque `viscous * qd` (zero by default).
@@ -117,11 +81,11 @@ impl Robot {
     /// Mass matrix and bias torque `C qd + g + viscous qd` from one kinematics pass; what a
     /// controller needs for (7.2).
     pub fn mass_matrix_and_bias(&self, q: &Vec6, qd: &Vec6) -> (Mat6, Vec6) {
-        let frames = self.frames(q);
+        let sc = sin_cos(q);
+        let frames = self.frames_from_sin_cos(&sc);
         let inertias = self.body_inertias(&frames);
         let m = self.crba_core(&frames, &inertias);
-        let bias = self.rnea_core(&frames, &inertias, qd, &Vec6::zeros(), Self::GRAVITY_MPS2)
-            + self.viscous.component_mul(qd);
+        let bias = self.rnea_local(&sc, qd, &Vec6::zeros(), Self::GRAVITY_MPS2) + self.viscous.component_mul(qd);
         (m, bias)
     }
 
@@ -152,43 +116,44 @@ impl Robot {
 }
 
 /// Solve `M x = b` for symmetric positive definite `M` by an unrolled Cholesky factorisation
-/// (`M = L L^T`); NaN if `M` is not positive definite.
+/// (`M = L L^T`, lower triangle of `M` read); NaN if `M` is not positive definite.
 #[inline(always)]
 pub fn cholesky_solve(m: Mat6, b: Vec6) -> Vec6 {
-    let mut l = m;
+    // Plain arrays: constant loop bounds let the compiler drop every bounds check.
+    let mut l = [[0.0f64; 6]; 6];
+    let mut inv_diag = [0.0f64; 6];
     for j in 0..6 {
-        let mut d = l[(j, j)];
+        let mut d = m[(j, j)];
         for k in 0..j {
-            d -= l[(j, k)] * l[(j, k)];
+            d -= l[j][k] * l[j][k];
         }
         if !(d > 0.0) {
             return Vec6::from_element(f64::NAN);
         }
-        let d = d.sqrt();
-        l[(j, j)] = d;
-        let inv = 1.0 / d;
+        let inv = 1.0 / d.sqrt();
+        inv_diag[j] = inv;
         for i in (j + 1)..6 {
-            let mut v = l[(i, j)];
+            let mut v = m[(i, j)];
             for k in 0..j {
-                v -= l[(i, k)] * l[(j, k)];
+                v -= l[i][k] * l[j][k];
             }
-            l[(i, j)] = v * inv;
+            l[i][j] = v * inv;
         }
     }
-    let mut x = b;
+    let mut x = [0.0f64; 6];
     for i in 0..6 {
-        let mut v = x[i];
+        let mut v = b[i];
         for k in 0..i {
-            v -= l[(i, k)] * x[k];
+            v -= l[i][k] * x[k];
         }
-        x[i] = v / l[(i, i)];
+        x[i] = v * inv_diag[i];
     }
     for i in (0..6).rev() {
         let mut v = x[i];
         for k in (i + 1)..6 {
-            v -= l[(k, i)] * x[k];
+            v -= l[k][i] * x[k];
         }
-        x[i] = v / l[(i, i)];
+        x[i] = v * inv_diag[i];
     }
-    x
+    Vec6::from(x)
 }

@@ -3,6 +3,7 @@
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
 use crate::model::Robot;
+use crate::newton_euler::{sin_cos, SinCos};
 use crate::spatial::{M3, V3};
 use crate::{Mat6, Vec6};
 
@@ -37,11 +38,16 @@ impl Robot {
     /// Forward kinematics of every link frame (thesis Table 7.1, `A_i = Rz Tz Tx Rx`).
     #[inline(always)]
     pub fn frames(&self, q: &Vec6) -> Frames {
+        self.frames_from_sin_cos(&sin_cos(q))
+    }
+
+    #[inline(always)]
+    pub(crate) fn frames_from_sin_cos(&self, sc: &SinCos) -> Frames {
         let mut rot = [M3::identity(); 7];
         let mut pos = [V3::zeros(); 7];
         for i in 0..6 {
             let dh = &self.dh[i];
-            let (st, ct) = q[i].sin_cos();
+            let (st, ct) = sc[i];
             let (ca, sa) = (dh.cos_alpha, dh.sin_alpha);
             // R_i = R_{i-1} Rz(q_i) Rx(alpha_i), by columns; origin moves by R_{i-1} (a c, a s, d).
             let prev = &rot[i];

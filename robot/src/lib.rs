@@ -8,6 +8,7 @@ pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
 pub mod model;
+mod newton_euler;
 pub mod params;
 pub mod scenario;
 mod spatial;

@@ -68,9 +68,3 @@ impl SpatialInertia {
         self.i += other.i;
     }
 }
-
-/// Force cross product `(w, v) x* (n, f) = (w x n + v x f, w x f)`.
-#[inline(always)]
-pub(crate) fn cross_force(w: &V3, v: &V3, n: &V3, f: &V3) -> (V3, V3) {
-    (w.cross(n) + v.cross(f), w.cross(f))
-}
