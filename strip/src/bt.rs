@@ -1,0 +1,286 @@
+//! Balanced truncation with matched DC gain (5.25)-(5.31) of the proportionally damped
+//! Craig-Bampton system, square-root method.
+//!
+//! faer has no Lyapunov solver, so the Gramians are written in closed form in the modal basis of
+//! the CB pencil: with K_CB Phi = M_CB Phi Omega^2 and Phi^T M_CB Phi = I, the state
+//! x = [eta_1, eta_1', eta_2, eta_2', ...] has a block-diagonal A with 2x2 blocks
+//! A_i = [[0, 1], [-w_i^2, -(alpha + beta w_i^2)]] (5.24). For block-diagonal A the Lyapunov
+//! equation A P + P A^T + B B^T = 0 decouples into 2x2 Sylvester equations per block pair:
+//! P_ij = (g_i . g_j) X_ij with A_i X_ij + X_ij A_j^T + e2 e2^T = 0, and likewise for the
+//! observability Gramian with the output columns.
+
+use faer::linalg::solvers::Solve;
+use faer::{Mat, MatRef, Side};
+
+use crate::error::{numeric, Result};
+
+/// Modal (second-order) form of a proportionally damped system with displacement outputs.
+pub struct ModalSystem {
+    /// omega_i^2 (rad^2/s^2), ascending.
+    pub omega2: Vec<f64>,
+    /// 2 zeta_i omega_i = alpha + beta omega_i^2.
+    pub damp: Vec<f64>,
+    /// Phi^T F: modal input rows (N x m).
+    pub g: Mat<f64>,
+    /// C_q Phi: modal output columns (p x N).
+    pub h: Mat<f64>,
+}
+
+/// Generalized symmetric eigenproblem K phi = w^2 M phi, M-orthonormal Phi (dense).
+pub fn generalized_eigen(k: MatRef<'_, f64>, m: MatRef<'_, f64>) -> Result<(Vec<f64>, Mat<f64>)> {
+    let n = k.nrows();
+    let llt = m.llt(Side::Lower).map_err(|e| numeric("CB mass Cholesky", format!("M_CB not positive definite: {e:?}")))?;
+    let l = llt.L();
+    let mut w = k.to_owned();
+    l.solve_lower_triangular_in_place(w.as_mut()); // L^-1 K
+    let mut s = w.transpose().to_owned();
+    l.solve_lower_triangular_in_place(s.as_mut()); // L^-1 K L^-T
+    for j in 0..n {
+        for i in 0..j {
+            let v = 0.5 * (s[(i, j)] + s[(j, i)]);
+            s[(i, j)] = v;
+            s[(j, i)] = v;
+        }
+    }
+    let evd = s.self_adjoint_eigen(Side::Lower).map_err(|e| numeric("CB eigen", format!("{e:?}")))?;
+    let lam: Vec<f64> = (0..n).map(|i| evd.S().column_vector()[i]).collect();
+    let mut phi = evd.U().to_owned();
+    l.transpose().solve_upper_triangular_in_place(phi.as_mut());
+    Ok((lam, phi))
+}
+
+/// Solves the 4x4 system for the 2x2 Sylvester equation
+/// op(A_i) X + X op(A_j)^T + E = 0 (controllability: op = id, E = e2 e2^T;
+/// observability: A_i^T Y + Y A_j + e1 e1^T = 0).
+fn block_solution(ai: (f64, f64), aj: (f64, f64), observability: bool) -> [f64; 4] {
+    let blk = |(a, c): (f64, f64)| [[0.0, 1.0], [-a, -c]];
+    let (a, b) = (blk(ai), blk(aj));
+    let mut m = [[0.0f64; 5]; 4];
+    for r in 0..2 {
+        for s in 0..2 {
+            let row = 2 * r + s;
+            for k in 0..2 {
+                for l in 0..2 {
+                    let col = 2 * k + l;
+                    if observability {
+                        // (A_i^T Y)[r][s] = A_i[k][r] Y[k][s]; (Y A_j)[r][s] = Y[r][l] A_j[l][s]
+                        if s == l {
+                            m[row][col] += a[k][r];
+                        }
+                        if r == k {
+                            m[row][col] += b[l][s];
+                        }
+                    } else {
+                        // (A_i X)[r][s] = A_i[r][k] X[k][s]; (X A_j^T)[r][s] = X[r][l] A_j[s][l]
+                        if s == l {
+                            m[row][col] += a[r][k];
+                        }
+                        if r == k {
+                            m[row][col] += b[s][l];
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if observability {
+        m[0][4] = -1.0;
+    } else {
+        m[3][4] = -1.0;
+    }
+    // Gaussian elimination with partial pivoting
+    for c in 0..4 {
+        let p = (c..4).max_by(|&x, &y| m[x][c].abs().total_cmp(&m[y][c].abs())).unwrap();
+        m.swap(c, p);
+        for r in 0..4 {
+            if r != c {
+                let f = m[r][c] / m[c][c];
+                for k in c..5 {
+                    m[r][k] -= f * m[c][k];
+                }
+            }
+        }
+    }
+    [m[0][4] / m[0][0], m[1][4] / m[1][1], m[2][4] / m[2][2], m[3][4] / m[3][3]]
+}
+
+impl ModalSystem {
+    pub fn n_states(&self) -> usize {
+        2 * self.omega2.len()
+    }
+
+    /// Dense first-order matrices (A, B, C) in the interleaved modal state.
+    pub fn state_space(&self) -> (Mat<f64>, Mat<f64>, Mat<f64>) {
+        let n = self.omega2.len();
+        let mut a = Mat::<f64>::zeros(2 * n, 2 * n);
+        let mut b = Mat::<f64>::zeros(2 * n, self.g.ncols());
+        let mut c = Mat::<f64>::zeros(self.h.nrows(), 2 * n);
+        for i in 0..n {
+            a[(2 * i, 2 * i + 1)] = 1.0;
+            a[(2 * i + 1, 2 * i)] = -self.omega2[i];
+            a[(2 * i + 1, 2 * i + 1)] = -self.damp[i];
+            b.row_mut(2 * i + 1).copy_from(self.g.row(i));
+            c.col_mut(2 * i).copy_from(self.h.col(i));
+        }
+        (a, b, c)
+    }
+
+    /// Controllability (observability = false) or observability Gramian in closed form.
+    pub fn gramian(&self, observability: bool) -> Mat<f64> {
+        let n = self.omega2.len();
+        let gg = if observability { self.h.transpose() * &self.h } else { &self.g * self.g.transpose() };
+        let mut p = Mat::<f64>::zeros(2 * n, 2 * n);
+        for j in 0..n {
+            for i in 0..=j {
+                let x = block_solution((self.omega2[i], self.damp[i]), (self.omega2[j], self.damp[j]), observability);
+                let s = gg[(i, j)];
+                p[(2 * i, 2 * j)] = s * x[0];
+                p[(2 * i, 2 * j + 1)] = s * x[1];
+                p[(2 * i + 1, 2 * j)] = s * x[2];
+                p[(2 * i + 1, 2 * j + 1)] = s * x[3];
+                if i != j {
+                    p[(2 * j, 2 * i)] = s * x[0];
+                    p[(2 * j + 1, 2 * i)] = s * x[1];
+                    p[(2 * j, 2 * i + 1)] = s * x[2];
+                    p[(2 * j + 1, 2 * i + 1)] = s * x[3];
+                }
+            }
+        }
+        p
+    }
+}
+
+/// A reduced state-space model x' = A x + B u, y = C x + D u.
+#[derive(Clone, Debug)]
+pub struct Reduced {
+    pub a: Mat<f64>,
+    pub b: Mat<f64>,
+    pub c: Mat<f64>,
+    pub d: Mat<f64>,
+    /// Hankel singular values of the full (weighted) CB system, descending.
+    pub hsv: Vec<f64>,
+}
+
+fn cholesky_factor(p: &Mat<f64>, what: &'static str) -> Result<Mat<f64>> {
+    if let Ok(l) = p.llt(Side::Lower) {
+        return Ok(l.L().to_owned());
+    }
+    // semidefinite in floating point: shift by a tiny multiple of the largest diagonal
+    let dmax = (0..p.nrows()).map(|i| p[(i, i)]).fold(0.0, f64::max);
+    for k in [1e-15, 1e-13, 1e-11] {
+        let mut q = p.clone();
+        for i in 0..q.nrows() {
+            q[(i, i)] += k * dmax;
+        }
+        if let Ok(l) = q.llt(Side::Lower) {
+            tracing::debug!(what, shift = k, "gramian regularised for Cholesky");
+            return Ok(l.L().to_owned());
+        }
+    }
+    Err(numeric("balanced truncation", format!("{what} Gramian is not positive definite")))
+}
+
+/// Square-root balanced truncation with matched DC gain (singular perturbation, 5.31) to `order`
+/// states. `out_weight` scales each output row for the balancing only (so that metres and newtons
+/// weigh alike); the returned C and D are in the original units.
+pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) -> Result<Reduced> {
+    let n = sys.n_states();
+    if order >= n {
+        return Err(numeric("balanced truncation", format!("order {order} >= CB state count {n}")));
+    }
+    let weighted = ModalSystem {
+        omega2: sys.omega2.clone(),
+        damp: sys.damp.clone(),
+        g: sys.g.clone(),
+        h: Mat::from_fn(sys.h.nrows(), sys.h.ncols(), |i, j| sys.h[(i, j)] * out_weight[i]),
+    };
+    crate::progress::stage("Gramians");
+    let p = weighted.gramian(false);
+    let q = weighted.gramian(true);
+    let lc = cholesky_factor(&p, "controllability")?;
+    let lo = cholesky_factor(&q, "observability")?;
+    drop((p, q));
+    crate::progress::stage("Hankel SVD");
+    let z = lo.transpose() * &lc;
+    let svd = z.svd().map_err(|e| numeric("balanced truncation SVD", format!("{e:?}")))?;
+    let sig: Vec<f64> = (0..n).map(|i| svd.S().column_vector()[i]).collect();
+    if !(sig[order - 1] > 0.0) {
+        return Err(numeric("balanced truncation", "Hankel singular values vanish before the order"));
+    }
+    crate::progress::stage("matched-DC truncation");
+    let floor = sig[0] * 1e-300_f64.max(f64::EPSILON * 1e-4);
+    let isq: Vec<f64> = sig.iter().map(|&s| 1.0 / s.max(floor).sqrt()).collect();
+    // T = Lc V S^-1/2, Tinv = S^-1/2 U^T Lo^T
+    let mut t = &lc * svd.V();
+    for j in 0..n {
+        let f = isq[j];
+        t.col_mut(j).iter_mut().for_each(|v| *v *= f);
+    }
+    let mut tinv = svd.U().transpose() * lo.transpose();
+    for i in 0..n {
+        let f = isq[i];
+        tinv.row_mut(i).iter_mut().for_each(|v| *v *= f);
+    }
+    let (am, bm, cm) = sys.state_space();
+    let at = &am * &t;
+    let abal = &tinv * &at;
+    let bbal = &tinv * &bm;
+    let cbal = &cm * &t;
+    let r = order;
+    let n2 = n - r;
+    let a11 = abal.as_ref().submatrix(0, 0, r, r);
+    let a12 = abal.as_ref().submatrix(0, r, r, n2);
+    let a21 = abal.as_ref().submatrix(r, 0, n2, r);
+    let a22 = abal.as_ref().submatrix(r, r, n2, n2);
+    let b1 = bbal.as_ref().submatrix(0, 0, r, bbal.ncols());
+    let b2 = bbal.as_ref().submatrix(r, 0, n2, bbal.ncols());
+    let c1 = cbal.as_ref().submatrix(0, 0, cbal.nrows(), r);
+    let c2 = cbal.as_ref().submatrix(0, r, cbal.nrows(), n2);
+    let lu = a22.partial_piv_lu();
+    let mut x21 = a21.to_owned();
+    lu.solve_in_place(x21.as_mut()); // A22^-1 A21
+    let mut x2b = b2.to_owned();
+    lu.solve_in_place(x2b.as_mut()); // A22^-1 B2
+    let a = a11 - a12 * &x21;
+    let b = b1 - a12 * &x2b;
+    let c = c1 - c2 * &x21;
+    let d = -(c2 * &x2b);
+    Ok(Reduced { a, b, c, d, hsv: sig })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::linalg::solvers::DenseSolveCore;
+
+    fn toy() -> ModalSystem {
+        let omega2 = vec![100.0f64.powi(2), 700.0f64.powi(2), 2300.0f64.powi(2), 9000.0f64.powi(2)];
+        let damp = omega2.iter().map(|w2| 60.0 + 3e-6 * w2).collect();
+        let g = Mat::from_fn(4, 2, |i, j| ((i + 2 * j) as f64 * 0.7).sin() + 0.1);
+        let h = Mat::from_fn(3, 4, |i, j| ((3 * i + j) as f64 * 0.3).cos());
+        ModalSystem { omega2, damp, g, h }
+    }
+
+    #[test]
+    fn closed_form_gramians_solve_lyapunov() {
+        let s = toy();
+        let (a, b, c) = s.state_space();
+        let p = s.gramian(false);
+        let q = s.gramian(true);
+        let rp = &a * &p + &p * a.transpose() + &b * b.transpose();
+        let rq = a.transpose() * &q + &q * &a + c.transpose() * &c;
+        assert!(rp.norm_max() < 1e-10 * (&b * b.transpose()).norm_max(), "{}", rp.norm_max());
+        assert!(rq.norm_max() < 1e-10 * (c.transpose() * &c).norm_max(), "{}", rq.norm_max());
+    }
+
+    #[test]
+    fn matched_dc_keeps_static_gain() {
+        let s = toy();
+        let (a, b, c) = s.state_space();
+        let r = balanced_matched_dc(&s, 5, &[1.0; 3]).unwrap();
+        let dc_full = -(&c * a.partial_piv_lu().inverse() * &b);
+        let dc_red = &r.d - &r.c * r.a.partial_piv_lu().inverse() * &r.b;
+        assert!((&dc_full - &dc_red).norm_max() < 1e-9 * dc_full.norm_max());
+        assert!(r.d.norm_max() > 0.0);
+    }
+}

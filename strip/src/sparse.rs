@@ -1,0 +1,130 @@
+//! Minimal compressed-sparse-column storage with the few operations the pipeline needs, and a
+//! bridge to faer's sparse Cholesky (AMD ordering, supernodal when worthwhile).
+
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{MatMut, Side};
+
+use crate::error::{numeric, Result};
+
+/// Square or rectangular CSC matrix; row indices sorted within each column.
+#[derive(Clone, Debug, Default)]
+pub struct Csc {
+    pub nrows: usize,
+    pub ncols: usize,
+    pub col_ptr: Vec<usize>,
+    pub row_idx: Vec<usize>,
+    pub val: Vec<f64>,
+}
+
+impl Csc {
+    pub fn nnz(&self) -> usize {
+        self.val.len()
+    }
+
+    /// faer view of this matrix.
+    pub fn as_faer(&self) -> SparseColMatRef<'_, usize, f64> {
+        SparseColMatRef::new(
+            SymbolicSparseColMatRef::new_checked(self.nrows, self.ncols, &self.col_ptr, None, &self.row_idx),
+            &self.val,
+        )
+    }
+
+    /// Submatrix: rows through `row_map` (old row -> new row or `usize::MAX` to drop), columns
+    /// `cols` (old column indices, in new order).
+    pub fn submatrix(&self, row_map: &[usize], new_nrows: usize, cols: &[usize]) -> Csc {
+        let mut col_ptr = Vec::with_capacity(cols.len() + 1);
+        let mut row_idx = Vec::new();
+        let mut val = Vec::new();
+        col_ptr.push(0);
+        let mut buf: Vec<(usize, f64)> = Vec::new();
+        for &c in cols {
+            buf.clear();
+            for p in self.col_ptr[c]..self.col_ptr[c + 1] {
+                let r = row_map[self.row_idx[p]];
+                if r != usize::MAX {
+                    buf.push((r, self.val[p]));
+                }
+            }
+            if buf.windows(2).any(|w| w[0].0 > w[1].0) {
+                buf.sort_unstable_by_key(|e| e.0);
+            }
+            for &(r, v) in &buf {
+                row_idx.push(r);
+                val.push(v);
+            }
+            col_ptr.push(row_idx.len());
+        }
+        Csc { nrows: new_nrows, ncols: cols.len(), col_ptr, row_idx, val }
+    }
+
+    /// y = A x
+    pub fn mul_vec(&self, x: &[f64], y: &mut [f64]) {
+        y.iter_mut().for_each(|v| *v = 0.0);
+        for c in 0..self.ncols {
+            let xc = x[c];
+            if xc == 0.0 {
+                continue;
+            }
+            for p in self.col_ptr[c]..self.col_ptr[c + 1] {
+                y[self.row_idx[p]] += self.val[p] * xc;
+            }
+        }
+    }
+
+    /// Y = A X for a dense column-major X (ncols x k), returned as nrows x k.
+    pub fn mul_dense(&self, x: faer::MatRef<'_, f64>) -> faer::Mat<f64> {
+        let mut y = faer::Mat::<f64>::zeros(self.nrows, x.ncols());
+        for j in 0..x.ncols() {
+            let xj = x.col(j);
+            let yj = y.col_mut(j).try_as_col_major_mut().unwrap().as_slice_mut();
+            for c in 0..self.ncols {
+                let xc = xj[c];
+                if xc == 0.0 {
+                    continue;
+                }
+                for p in self.col_ptr[c]..self.col_ptr[c + 1] {
+                    yj[self.row_idx[p]] += self.val[p] * xc;
+                }
+            }
+        }
+        y
+    }
+
+    /// Dense copy (for small matrices and tests).
+    pub fn to_dense(&self) -> faer::Mat<f64> {
+        let mut m = faer::Mat::<f64>::zeros(self.nrows, self.ncols);
+        for c in 0..self.ncols {
+            for p in self.col_ptr[c]..self.col_ptr[c + 1] {
+                m[(self.row_idx[p], c)] += self.val[p];
+            }
+        }
+        m
+    }
+}
+
+/// Sparse Cholesky factor of a symmetric positive definite matrix (lower triangle used).
+pub struct Cholesky {
+    llt: Llt<usize, f64>,
+    pub n: usize,
+}
+
+impl Cholesky {
+    pub fn new(a: &Csc, stage: &'static str) -> Result<Cholesky> {
+        let sym = SymbolicLlt::try_new(a.as_faer().symbolic(), Side::Lower)
+            .map_err(|e| numeric(stage, format!("symbolic Cholesky: {e:?}")))?;
+        let llt = Llt::try_new_with_symbolic(sym, a.as_faer(), Side::Lower)
+            .map_err(|e| numeric(stage, format!("matrix not positive definite ({e:?})")))?;
+        Ok(Cholesky { llt, n: a.nrows })
+    }
+
+    pub fn solve_in_place(&self, rhs: MatMut<'_, f64>) {
+        self.llt.solve_in_place(rhs);
+    }
+
+    pub fn solve_vec(&self, rhs: &mut [f64]) {
+        let n = rhs.len();
+        self.llt.solve_in_place(faer::MatMut::from_column_major_slice_mut(rhs, n, 1));
+    }
+}

@@ -1,0 +1,191 @@
+//! Exact zero-order-hold stepping of the reduced model in its diagonal (modal) form.
+//!
+//! For each mode k: xi_k <- z_k xi_k + gamma_k (b_k . u) with z_k = exp(lambda_k dt) and
+//! gamma_k = (z_k - 1) / lambda_k, which is the exact ZOH discretisation of x' = A x + B u
+//! (the matched-DC poles near 6e5 rad/s are no problem for any dt). Outputs: y = C x + D u.
+//! Nothing here allocates after construction.
+
+use faer::c64;
+
+use crate::model::StripModel;
+
+/// Discrete-time strip model for a fixed step `dt`. All forces along +y (pressing is negative),
+/// see the conventions in [`crate::model`].
+pub struct StripStepper {
+    dt: f64,
+    modes: usize,
+    n_top: usize,
+    n_out: usize,
+    z: Vec<c64>,
+    /// gamma_k b_kj, input-major (j * modes + k).
+    bz: Vec<c64>,
+    /// weighted C V, output-major.
+    c: Vec<c64>,
+    d: Vec<f64>, // row-major p x m
+    xi: Vec<c64>,
+    // wheel direction cache
+    wheel_b: Vec<c64>,
+    wheel_c: Vec<c64>,
+    wheel_d: f64,
+    wheel_d_bottom: Vec<f64>,
+}
+
+impl StripStepper {
+    /// Discretises `model` for step `dt` (s), state at rest (zero).
+    pub fn new(model: &StripModel, dt: f64) -> StripStepper {
+        assert!(dt > 0.0 && dt.is_finite(), "dt must be positive, got {dt}");
+        let mf = &model.modal;
+        let modes = mf.modes();
+        let m = model.n_top();
+        let p = model.c.nrows();
+        let z: Vec<c64> = mf.lam.iter().map(|&l| (l * dt).exp()).collect();
+        let gamma: Vec<c64> = mf.lam.iter().zip(&z).map(|(&l, &zz)| (zz - c64::new(1.0, 0.0)) / l).collect();
+        let mut bz = vec![c64::new(0.0, 0.0); m * modes];
+        for j in 0..m {
+            for k in 0..modes {
+                bz[j * modes + k] = gamma[k] * mf.b[j * modes + k];
+            }
+        }
+        let d = (0..p).flat_map(|i| (0..m).map(move |j| (i, j))).map(|(i, j)| model.d[(i, j)]).collect();
+        StripStepper {
+            dt,
+            modes,
+            n_top: m,
+            n_out: p,
+            z,
+            bz,
+            c: mf.c.clone(),
+            d,
+            xi: vec![c64::new(0.0, 0.0); modes],
+            wheel_b: vec![c64::new(0.0, 0.0); modes],
+            wheel_c: vec![c64::new(0.0, 0.0); modes],
+            wheel_d: 0.0,
+            wheel_d_bottom: vec![0.0; p - m],
+        }
+    }
+
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+    /// Number of modal coordinates (complex pairs count once).
+    pub fn modes(&self) -> usize {
+        self.modes
+    }
+
+    /// Back to rest.
+    pub fn reset(&mut self) {
+        self.xi.iter_mut().for_each(|x| *x = c64::new(0.0, 0.0));
+    }
+
+    /// Advances one step with top nodal forces `top_forces` (N, +y) held over the step.
+    /// Zero entries are skipped, so a Gaussian load costs O(nonzeros x modes).
+    pub fn step(&mut self, top_forces: &[f64]) {
+        assert_eq!(top_forces.len(), self.n_top);
+        for x in self.xi.iter_mut().zip(&self.z) {
+            *x.0 = *x.0 * *x.1;
+        }
+        for (j, &u) in top_forces.iter().enumerate() {
+            if u != 0.0 {
+                let col = &self.bz[j * self.modes..(j + 1) * self.modes];
+                for (x, b) in self.xi.iter_mut().zip(col) {
+                    x.re += b.re * u;
+                    x.im += b.im * u;
+                }
+            }
+        }
+    }
+
+    /// y = C x + D u: top u_y (m) and bottom reactions (N, on the strip, +y) at the current state
+    /// for the current input `top_forces`. Excludes the bulge offsets (add `StripModel::bulge_*`).
+    pub fn outputs(&self, top_forces: &[f64], top_disp: &mut [f64], bottom_reaction: &mut [f64]) {
+        assert_eq!(top_disp.len(), self.n_top);
+        assert_eq!(bottom_reaction.len(), self.n_out - self.n_top);
+        for i in 0..self.n_out {
+            let row = &self.c[i * self.modes..(i + 1) * self.modes];
+            let mut y: f64 = row.iter().zip(&self.xi).map(|(c, x)| c.re * x.re - c.im * x.im).sum();
+            let drow = &self.d[i * self.n_top..(i + 1) * self.n_top];
+            for (dv, &u) in drow.iter().zip(top_forces) {
+                if u != 0.0 {
+                    y += dv * u;
+                }
+            }
+            if i < self.n_top {
+                top_disp[i] = y;
+            } else {
+                bottom_reaction[i - self.n_top] = y;
+            }
+        }
+    }
+
+    /// Output `i` only (index into [top u_y; bottom reactions]).
+    pub fn output(&self, i: usize, top_forces: &[f64]) -> f64 {
+        let row = &self.c[i * self.modes..(i + 1) * self.modes];
+        let mut y: f64 = row.iter().zip(&self.xi).map(|(c, x)| c.re * x.re - c.im * x.im).sum();
+        let drow = &self.d[i * self.n_top..(i + 1) * self.n_top];
+        for (dv, &u) in drow.iter().zip(top_forces) {
+            y += dv * u;
+        }
+        y
+    }
+
+    /// Caches the wheel direction: weights `w` (from `gaussian_weights`, sum 1). Afterwards the
+    /// input is u = f_y w and the scalar helpers below cost O(modes). Costs O(nonzeros x modes
+    /// + outputs); call it when the wheel position changes (allocation-free).
+    pub fn set_wheel(&mut self, w: &[f64]) {
+        assert_eq!(w.len(), self.n_top);
+        self.wheel_b.iter_mut().for_each(|v| *v = c64::new(0.0, 0.0));
+        self.wheel_c.iter_mut().for_each(|v| *v = c64::new(0.0, 0.0));
+        self.wheel_d_bottom.iter_mut().for_each(|v| *v = 0.0);
+        let mut dww = 0.0;
+        for (j, &wj) in w.iter().enumerate() {
+            if wj == 0.0 {
+                continue;
+            }
+            let col = &self.bz[j * self.modes..(j + 1) * self.modes];
+            for (acc, b) in self.wheel_b.iter_mut().zip(col) {
+                acc.re += b.re * wj;
+                acc.im += b.im * wj;
+            }
+            let row = &self.c[j * self.modes..(j + 1) * self.modes];
+            for (acc, c) in self.wheel_c.iter_mut().zip(row) {
+                acc.re += c.re * wj;
+                acc.im += c.im * wj;
+            }
+            for (i, &wi) in w.iter().enumerate() {
+                dww += wi * self.d[i * self.n_top + j] * wj;
+            }
+            for (r, acc) in self.wheel_d_bottom.iter_mut().enumerate() {
+                *acc += self.d[(self.n_top + r) * self.n_top + j] * wj;
+            }
+        }
+        self.wheel_d = dww;
+    }
+
+    /// Wheel-point displacement w^T (C_top x) (m, +y) from the state alone.
+    pub fn wheel_uy_free(&self) -> f64 {
+        self.wheel_c.iter().zip(&self.xi).map(|(c, x)| c.re * x.re - c.im * x.im).sum()
+    }
+
+    /// Feed-through compliance w^T D_top w (m/N, > 0): the wheel-point displacement is
+    /// `wheel_uy_free() + wheel_compliance() * f_y`. With a penalty law this scalar algebraic
+    /// loop solves in closed form.
+    pub fn wheel_compliance(&self) -> f64 {
+        self.wheel_d
+    }
+
+    /// Advances one step with the wheel load u = f_y w (N, +y; pressing is negative), O(modes).
+    pub fn step_wheel(&mut self, f_y: f64) {
+        for ((x, z), b) in self.xi.iter_mut().zip(&self.z).zip(&self.wheel_b) {
+            *x = *x * *z;
+            x.re += b.re * f_y;
+            x.im += b.im * f_y;
+        }
+    }
+
+    /// Bottom reaction of bottom node `i` (N, +y) under the wheel load f_y (after `set_wheel`).
+    pub fn wheel_bottom_reaction(&self, i: usize, f_y: f64) -> f64 {
+        let r = self.n_top + i;
+        let row = &self.c[r * self.modes..(r + 1) * self.modes];
+        row.iter().zip(&self.xi).map(|(c, x)| c.re * x.re - c.im * x.im).sum::<f64>() + self.wheel_d_bottom[i] * f_y
+    }
+}
