@@ -1,1 +1,308 @@
-//! (in progress)
+//! Numbers of a recording: ticks, misses, safe stops, drops, latency percentiles, and while the
+//! wheel rolls the force tracking (thesis Figure 7.2, the 0.45 N band of Section 7.4) and the
+//! share of the rolled length pressed with at least 100 kPa (the bond criterion, Section 4.2).
+
+use crate::read::Recording;
+use serde::Serialize;
+
+/// The bond needs at least this bottom pressure under the wheel (thesis Section 4.2, Appendix C).
+pub const BOND_PRESSURE_PA: f64 = 100e3;
+
+/// A wheel that moved less than this along the strip in one tick counts as standing still when
+/// the controller published no reference to tell (0.1 mm/s at 1 kHz).
+pub const ROLLING_MIN_STEP_M: f64 = 1e-7;
+
+/// Nearest-rank percentiles of a sample, in the sample's unit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Percentiles {
+    pub n: usize,
+    pub mean: f64,
+    pub p50: f64,
+    pub p90: f64,
+    pub p99: f64,
+    pub p999: f64,
+    pub max: f64,
+}
+
+impl Percentiles {
+    /// None for an empty sample.
+    pub fn of(mut v: Vec<f64>) -> Option<Self> {
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        // Nearest rank: the smallest value with at least p of the sample at or below it.
+        let rank = |p: f64| v[((p * n as f64).ceil() as usize).clamp(1, n) - 1];
+        Some(Self {
+            n,
+            mean: v.iter().sum::<f64>() / n as f64,
+            p50: rank(0.50),
+            p90: rank(0.90),
+            p99: rank(0.99),
+            p999: rank(0.999),
+            max: v[n - 1],
+        })
+    }
+}
+
+/// Numbers over the ticks where the wheel rolls along the strip.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RollingNumbers {
+    pub ticks: usize,
+    pub z_from_m: f64,
+    pub z_to_m: f64,
+    /// Sum of |dz| over the rolling ticks, m.
+    pub rolled_length_m: f64,
+    /// max |(|bottom_force| - |force_ref|)|, N (ticks with controller diagnostics).
+    pub force_error_max_abs_n: Option<f64>,
+    /// RMS of |bottom_force| - |force_ref|, N.
+    pub force_error_rms_n: Option<f64>,
+    /// Mean of |bottom_force| - |force_ref|, N (the steady error of a controller without integral action).
+    pub force_error_mean_n: Option<f64>,
+    /// Share (0..1) of the rolled length where the centre-line bottom pressure under the wheel
+    /// reached [`BOND_PRESSURE_PA`].
+    pub bond_pressure_share: Option<f64>,
+}
+
+/// Everything `rig report` prints and writes as JSON.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReportNumbers {
+    pub file: String,
+    /// Why the file ends early (killed run), if it does.
+    pub truncated: Option<String>,
+    pub ticks: usize,
+    pub first_tick: u64,
+    pub last_tick: u64,
+    pub period_s: f64,
+    /// ticks * period, s.
+    pub duration_s: f64,
+    /// Ticks whose torque was late, missing or refused.
+    pub misses: u64,
+    /// Entries into the safe stop (plant status transitions).
+    pub safe_stops: u64,
+    /// Records the recorder dropped (must be 0).
+    pub dropped: u64,
+    pub events: usize,
+    /// Round trip publish -> torque received, us, over ticks whose torque arrived in time.
+    pub latency_us: Option<Percentiles>,
+    /// Plant compute time per tick, us.
+    pub plant_compute_us: Option<Percentiles>,
+    pub rolling: Option<RollingNumbers>,
+}
+
+/// Index i (into the tick rows) of every tick where the wheel rolls: in contact and moving along
+/// the strip since the previous tick. The controller's reference z decides when it published
+/// one for both ticks (no jitter); otherwise the wheel must move more than [`ROLLING_MIN_STEP_M`].
+pub fn rolling_ticks(rec: &Recording) -> Vec<usize> {
+    let ctrl = rec.controller_by_tick();
+    let n = rec.strip.len().min(rec.joint_state.len());
+    (1..n)
+        .filter(|&i| {
+            let in_contact = rec.joint_state[i].flags & messages::state_flags::IN_CONTACT != 0 || rec.strip[i].contact_force_n != 0.0;
+            if !in_contact {
+                return false;
+            }
+            match (ctrl[i - 1], ctrl[i]) {
+                (Some(a), Some(b)) => rec.controller[a].pos_ref_task_m[2] != rec.controller[b].pos_ref_task_m[2],
+                _ => (rec.strip[i].wheel_z_m - rec.strip[i - 1].wheel_z_m).abs() > ROLLING_MIN_STEP_M,
+            }
+        })
+        .collect()
+}
+
+/// Linear interpolation of (z, p) samples at `z` (clamped to the ends). `z_nodes` ascending.
+pub fn interpolate(z_nodes: &[f64], p: &[f32], z: f64) -> Option<f64> {
+    let n = z_nodes.len().min(p.len());
+    if n == 0 {
+        return None;
+    }
+    let z_nodes = &z_nodes[..n];
+    let j = z_nodes.partition_point(|&zn| zn <= z);
+    Some(if j == 0 {
+        p[0] as f64
+    } else if j == n {
+        p[n - 1] as f64
+    } else {
+        let (z0, z1) = (z_nodes[j - 1], z_nodes[j]);
+        let w = (z - z0) / (z1 - z0);
+        p[j - 1] as f64 * (1.0 - w) + p[j] as f64 * w
+    })
+}
+
+pub fn numbers(rec: &Recording) -> ReportNumbers {
+    let ticks = rec.joint_state.len();
+    let period_s = rec.period_s();
+    let misses = rec.timing.iter().filter(|t| t.timing.missed).count() as u64;
+    let safe = messages::PlantStatus::SafeStop as u32;
+    let safe_stops = rec
+        .joint_state
+        .iter()
+        .enumerate()
+        .filter(|(i, s)| s.plant_status == safe && (*i == 0 || rec.joint_state[i - 1].plant_status != safe))
+        .count() as u64;
+    let latency = rec
+        .timing
+        .iter()
+        .filter(|t| !t.timing.missed && t.timing.torque_receive_wall_ns != 0)
+        .map(|t| t.timing.round_trip_ns as f64 * 1e-3)
+        .collect();
+    let plant = rec.timing.iter().map(|t| t.timing.plant_compute_ns as f64 * 1e-3).collect();
+    ReportNumbers {
+        file: rec.path.display().to_string(),
+        truncated: rec.truncated.clone(),
+        ticks,
+        first_tick: rec.joint_state.first().map_or(0, |s| s.tick),
+        last_tick: rec.joint_state.last().map_or(0, |s| s.tick),
+        period_s,
+        duration_s: ticks as f64 * period_s,
+        misses,
+        safe_stops,
+        dropped: rec.dropped(),
+        events: rec.events.len(),
+        latency_us: Percentiles::of(latency),
+        plant_compute_us: Percentiles::of(plant),
+        rolling: rolling_numbers(rec),
+    }
+}
+
+fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
+    let roll = rolling_ticks(rec);
+    if roll.is_empty() {
+        return None;
+    }
+    let ctrl = rec.controller_by_tick();
+    let errors: Vec<f64> = roll
+        .iter()
+        .filter_map(|&i| ctrl[i].map(|c| rec.strip[i].bottom_force_n.abs() - rec.controller[c].force_ref_n.abs()))
+        .collect();
+    let n_err = errors.len() as f64;
+    let (max_abs, rms, mean) = if errors.is_empty() {
+        (None, None, None)
+    } else {
+        (
+            Some(errors.iter().fold(0.0f64, |m, e| m.max(e.abs()))),
+            Some((errors.iter().map(|e| e * e).sum::<f64>() / n_err).sqrt()),
+            Some(errors.iter().sum::<f64>() / n_err),
+        )
+    };
+    let z_nodes = rec.centreline_z_m();
+    let mut rolled = 0.0;
+    let mut pressed = 0.0;
+    let mut have_pressure = true;
+    for &i in &roll {
+        let dz = (rec.strip[i].wheel_z_m - rec.strip[i - 1].wheel_z_m).abs();
+        rolled += dz;
+        match interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m) {
+            // Compressive pressure; its sign convention is the strip model's, so judge |p|.
+            Some(p) if p.abs() >= BOND_PRESSURE_PA => pressed += dz,
+            Some(_) => {}
+            None => have_pressure = false,
+        }
+    }
+    let zs = roll.iter().map(|&i| rec.strip[i].wheel_z_m);
+    Some(RollingNumbers {
+        ticks: roll.len(),
+        z_from_m: rec.strip[roll[0] - 1].wheel_z_m,
+        z_to_m: zs.clone().last().unwrap(),
+        rolled_length_m: rolled,
+        force_error_max_abs_n: max_abs,
+        force_error_rms_n: rms,
+        force_error_mean_n: mean,
+        bond_pressure_share: (have_pressure && rolled > 0.0).then(|| pressed / rolled),
+    })
+}
+
+/// The numbers as the text `rig report` and `rig run` print.
+pub fn format_text(n: &ReportNumbers) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "recording   {}", n.file);
+    if let Some(t) = &n.truncated {
+        let _ = writeln!(s, "WARNING     truncated file (killed run?): {t}");
+    }
+    let _ = writeln!(
+        s,
+        "ticks       {} ({}..={}), {:.3} s at {:.0} Hz",
+        n.ticks,
+        n.first_tick,
+        n.last_tick,
+        n.duration_s,
+        if n.period_s > 0.0 { 1.0 / n.period_s } else { 0.0 }
+    );
+    let _ = writeln!(s, "misses      {}", n.misses);
+    let _ = writeln!(s, "safe stops  {}", n.safe_stops);
+    let _ = writeln!(s, "dropped     {}{}", n.dropped, if n.dropped > 0 { "  (RECORDING INCOMPLETE)" } else { "" });
+    let _ = writeln!(s, "events      {}", n.events);
+    let pct = |name: &str, p: &Option<Percentiles>, s: &mut String| {
+        let _ = match p {
+            Some(p) => writeln!(
+                s,
+                "{name:<11} p50 {:.1} us, p90 {:.1}, p99 {:.1}, p99.9 {:.1}, max {:.1} (n = {})",
+                p.p50, p.p90, p.p99, p.p999, p.max, p.n
+            ),
+            None => writeln!(s, "{name:<11} none"),
+        };
+    };
+    pct("latency", &n.latency_us, &mut s);
+    pct("plant step", &n.plant_compute_us, &mut s);
+    match &n.rolling {
+        None => {
+            let _ = writeln!(s, "rolling     the wheel did not roll along the strip");
+        }
+        Some(r) => {
+            let _ = writeln!(
+                s,
+                "rolling     {} ticks, z {:.2} -> {:.2} mm ({:.2} mm rolled)",
+                r.ticks,
+                r.z_from_m * 1e3,
+                r.z_to_m * 1e3,
+                r.rolled_length_m * 1e3
+            );
+            let _ = match (r.force_error_max_abs_n, r.force_error_rms_n, r.force_error_mean_n) {
+                (Some(m), Some(rms), Some(mean)) => writeln!(
+                    s,
+                    "force err   |bottom| - |ref|: max {m:.3} N, RMS {rms:.3} N, mean {mean:+.3} N (thesis: within 0.45 N)"
+                ),
+                _ => writeln!(s, "force err   no controller diagnostics (no force reference recorded)"),
+            };
+            let _ = match r.bond_pressure_share {
+                Some(share) => writeln!(
+                    s,
+                    "bond        {:.1} % of the rolled length saw >= {:.0} kPa on the centre line under the wheel",
+                    share * 100.0,
+                    BOND_PRESSURE_PA * 1e-3
+                ),
+                None => writeln!(s, "bond        no centre-line pressure recorded"),
+            };
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearest_rank_percentiles() {
+        let p = Percentiles::of((1..=1000).map(|v| v as f64).collect()).unwrap();
+        assert_eq!((p.p50, p.p90, p.p99, p.p999, p.max), (500.0, 900.0, 990.0, 999.0, 1000.0));
+        assert_eq!(p.mean, 500.5);
+        let one = Percentiles::of(vec![7.0]).unwrap();
+        assert_eq!((one.p50, one.p999), (7.0, 7.0));
+        assert!(Percentiles::of(vec![]).is_none());
+    }
+
+    #[test]
+    fn interpolation_is_linear_between_nodes_and_clamped_outside() {
+        let z = [0.0, 1.0, 3.0];
+        let p = [10.0f32, 20.0, 0.0];
+        assert_eq!(interpolate(&z, &p, 0.5), Some(15.0));
+        assert_eq!(interpolate(&z, &p, 2.0), Some(10.0));
+        assert_eq!(interpolate(&z, &p, 1.0), Some(20.0));
+        assert_eq!(interpolate(&z, &p, -1.0), Some(10.0));
+        assert_eq!(interpolate(&z, &p, 9.0), Some(0.0));
+        assert_eq!(interpolate(&[], &p, 0.0), None);
+    }
+}

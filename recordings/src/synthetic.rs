@@ -105,7 +105,8 @@ impl SyntheticRun {
         r.state.tick = k;
         r.state.sim_time_s = t;
         r.state.period_s = self.period_s;
-        r.state.plant_status = messages::PlantStatus::Running as u32;
+        // One tick of safe stop in the middle (matching the events below).
+        r.state.plant_status = if k == self.ticks / 2 { messages::PlantStatus::SafeStop } else { messages::PlantStatus::Running } as u32;
         r.state.flags = messages::state_flags::LOCKSTEP | messages::state_flags::IN_CONTACT;
         for j in 0..6 {
             r.state.q[j] = 0.1 * j as f64 + 1e-3 * (t * (j + 1) as f64).sin();

@@ -1,0 +1,64 @@
+//! `rig report` numbers on a synthetic recording whose contents are known in closed form
+//! (see `recordings::synthetic`).
+
+use recordings::read::Recording;
+use recordings::report::{self, BOND_PRESSURE_PA};
+use recordings::synthetic::SyntheticRun;
+use recordings::RecorderConfig;
+
+#[test]
+fn report_on_a_known_recording_gives_the_known_numbers() {
+    let run = SyntheticRun::default();
+    let dir = std::env::temp_dir().join(format!("recordings-report-{}", std::process::id()));
+    let path = dir.join("known.mcap");
+    let mut cfg = RecorderConfig::new(&path);
+    cfg.metadata = run.metadata();
+    run.record(cfg).unwrap();
+    let rec = Recording::open_complete(&path).unwrap();
+    let n = report::numbers(&rec);
+
+    assert_eq!(n.ticks as u64, run.ticks);
+    assert!((n.duration_s - run.ticks as f64 * run.period_s).abs() < 1e-12);
+    assert_eq!(n.misses, (0..run.ticks).filter(|&k| run.is_miss(k)).count() as u64);
+    assert_eq!(n.misses, 3);
+    assert_eq!(n.safe_stops, 1);
+    assert_eq!(n.dropped, 0);
+    assert_eq!(n.events, 4);
+
+    // Latency: smallest value with at least p of the in-time ticks at or below it, counted
+    // directly from the run's round-trip law.
+    let lat: Vec<u64> = (0..run.ticks).filter(|&k| !run.is_miss(k)).map(|k| run.round_trip_ns(k)).collect();
+    let nearest_rank = |p: f64| {
+        let need = (p * lat.len() as f64).ceil() as usize;
+        (0..=200_000u64).step_by(1000).find(|&v| lat.iter().filter(|&&x| x <= v).count() >= need).unwrap() as f64 * 1e-3
+    };
+    let l = n.latency_us.unwrap();
+    assert_eq!(l.n, lat.len());
+    assert_eq!((l.p50, l.p90, l.p99), (nearest_rank(0.5), nearest_rank(0.9), nearest_rank(0.99)));
+    assert_eq!(l.max, *lat.iter().max().unwrap() as f64 * 1e-3);
+
+    let r = n.rolling.clone().expect("the wheel rolls");
+    assert_eq!(r.ticks as u64, run.roll_ticks);
+    assert_eq!((r.z_from_m, r.z_to_m), (run.z_start_m, run.z_end_m));
+    assert!((r.rolled_length_m - (run.z_end_m - run.z_start_m)).abs() < 1e-12, "monotone roll: length telescopes");
+    // A sin over m whole periods sampled N times: max A, RMS A / sqrt(2), mean 0.
+    let a = run.force_error_n;
+    assert!((r.force_error_max_abs_n.unwrap() - a).abs() < 1e-9, "{r:?}");
+    assert!((r.force_error_rms_n.unwrap() - a / 2f64.sqrt()).abs() < 1e-9, "{r:?}");
+    assert!(r.force_error_mean_n.unwrap().abs() < 1e-9, "{r:?}");
+    // Bond share: the peak under the wheel is >= 100 kPa exactly while z < coverage_z (and the
+    // Gaussian between two nodes stays above 100 kPa), so the pressed length telescopes to the
+    // last wheel position below coverage_z.
+    assert!(run.peak_pressure_pa * (-(0.25f64 / 2.0).powi(2)).exp() > BOND_PRESSURE_PA && run.peak_pressure_pa / 3.0 < BOND_PRESSURE_PA);
+    let last_below = (0..run.ticks)
+        .filter(|&k| run.is_rolling(k) && run.wheel_z_m(k) < run.coverage_z_m)
+        .map(|k| run.wheel_z_m(k))
+        .fold(f64::MIN, f64::max);
+    let want = (last_below - run.z_start_m) / (run.z_end_m - run.z_start_m);
+    let share = r.bond_pressure_share.unwrap();
+    assert!((share - want).abs() < 1e-12, "{share} vs {want}");
+    assert!((share - 0.75).abs() < 1e-3, "{share}: the closed form (29 - 2) / 36 within one tick's step");
+
+    let text = report::format_text(&n);
+    assert!(text.contains("misses      3") && text.contains("safe stops  1") && text.contains("75.0 %"), "{text}");
+}
