@@ -306,3 +306,129 @@ mod tests {
         assert_eq!(interpolate(&[], &p, 0.0), None);
     }
 }
+
+/// Files `write_report` produced.
+#[derive(Debug, Clone, Default)]
+pub struct ReportFiles {
+    pub text: std::path::PathBuf,
+    pub json: std::path::PathBuf,
+    pub figures: Vec<std::path::PathBuf>,
+}
+
+/// The default instants of the pressure figure: the wheel at 10, 30, 50, 70, 90 % of its roll
+/// (or 5 evenly spaced ticks if it never rolls). Sim times, s.
+pub fn default_instants(rec: &Recording) -> Vec<f64> {
+    let roll = rolling_ticks(rec);
+    let t = |i: usize| rec.joint_state[i].sim_time_s;
+    if let (Some(&first), Some(&last)) = (roll.first(), roll.last()) {
+        let (z0, z1) = (rec.strip[first - 1].wheel_z_m, rec.strip[last].wheel_z_m);
+        return [0.1, 0.3, 0.5, 0.7, 0.9]
+            .iter()
+            .filter_map(|f| {
+                let target = z0 + f * (z1 - z0);
+                roll.iter().find(|&&i| (rec.strip[i].wheel_z_m - target) * (z1 - z0).signum() >= 0.0).map(|&i| t(i))
+            })
+            .collect();
+    }
+    let n = rec.joint_state.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    (0..5).map(|k| t((n - 1) * (2 * k + 1) / 10)).collect()
+}
+
+/// Writes `report.txt`, `report.json` and the figures (PNG + SVG) into `out_dir`.
+/// `instants`: sim times (s) of the pressure-profile figure; empty = [`default_instants`].
+pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]) -> anyhow::Result<(ReportNumbers, ReportFiles)> {
+    use crate::plots::{self, Histogram, LinePlot, Series};
+    use anyhow::Context;
+    std::fs::create_dir_all(out_dir).with_context(|| format!("creating the report folder {}", out_dir.display()))?;
+    let n = numbers(rec);
+    let mut files = ReportFiles { text: out_dir.join("report.txt"), json: out_dir.join("report.json"), figures: Vec::new() };
+    std::fs::write(&files.text, format_text(&n)).with_context(|| format!("writing {}", files.text.display()))?;
+    std::fs::write(&files.json, serde_json::to_string_pretty(&n)? + "\n").with_context(|| format!("writing {}", files.json.display()))?;
+
+    // Figure 7.2: set-point and realised bottom force against the wheel position.
+    let ctrl = rec.controller_by_tick();
+    let roll = rolling_ticks(rec);
+    if !roll.is_empty() {
+        let z_mm = |i: usize| rec.strip[i].wheel_z_m * 1e3;
+        let mut plot = LinePlot {
+            title: "Force set-point and bottom force while rolling (thesis Figure 7.2)".into(),
+            x_label: "wheel position along the strip z [mm]".into(),
+            y_label: "force magnitude [N]".into(),
+            series: vec![Series {
+                label: "|bottom force| (realised)".into(),
+                points: roll.iter().map(|&i| (z_mm(i), rec.strip[i].bottom_force_n.abs())).collect(),
+            }],
+            hlines: Vec::new(),
+        };
+        let refs: Vec<(f64, f64)> = roll.iter().filter_map(|&i| ctrl[i].map(|c| (z_mm(i), rec.controller[c].force_ref_n.abs()))).collect();
+        if !refs.is_empty() {
+            plot.series.insert(0, Series { label: "|force set-point|".into(), points: refs });
+        }
+        plot.series.push(Series {
+            label: "|wheel contact force|".into(),
+            points: roll.iter().map(|&i| (z_mm(i), rec.strip[i].contact_force_n.abs())).collect(),
+        });
+        files.figures.extend(plots::save_lines(&plot, &out_dir.join("force_tracking"))?);
+    }
+
+    // Figure 7.4: bottom pressure along the centre line at chosen instants.
+    let z_nodes = rec.centreline_z_m();
+    let instants = if instants.is_empty() { default_instants(rec) } else { instants.to_vec() };
+    if !z_nodes.is_empty() && !rec.strip.is_empty() {
+        let mut series = Vec::new();
+        for t in instants {
+            let i = rec.joint_state.partition_point(|s| s.sim_time_s < t).min(rec.joint_state.len() - 1);
+            let s = &rec.strip[i.min(rec.strip.len() - 1)];
+            series.push(Series {
+                label: format!("t = {:.3} s, wheel at {:.1} mm", rec.joint_state[i].sim_time_s, s.wheel_z_m * 1e3),
+                points: z_nodes.iter().zip(&s.centreline_pressure_pa).map(|(z, p)| (z * 1e3, *p as f64 * 1e-3)).collect(),
+            });
+        }
+        let plot = LinePlot {
+            title: "Bottom pressure on the centre line x = 0 (thesis Figure 7.4)".into(),
+            x_label: "z along the strip [mm]".into(),
+            y_label: "bottom pressure [kPa]".into(),
+            series,
+            hlines: vec![(BOND_PRESSURE_PA * 1e-3, "100 kPa bond pressure".into())],
+        };
+        files.figures.extend(plots::save_lines(&plot, &out_dir.join("bottom_pressure"))?);
+    }
+
+    // Joint torques as applied.
+    if !rec.joint_torque.is_empty() {
+        let t = |i: usize| rec.joint_state.get(i).map_or(i as f64 * n.period_s, |s| s.sim_time_s);
+        let plot = LinePlot {
+            title: "Joint torques as applied".into(),
+            x_label: "simulated time [s]".into(),
+            y_label: "torque [N m]".into(),
+            series: (0..messages::DOF)
+                .map(|j| Series {
+                    label: format!("joint {}", j + 1),
+                    points: rec.joint_torque.iter().enumerate().map(|(i, r)| (t(i), r.torque.tau[j])).collect(),
+                })
+                .collect(),
+            hlines: Vec::new(),
+        };
+        files.figures.extend(plots::save_lines(&plot, &out_dir.join("joint_torques"))?);
+    }
+
+    // Latency histogram.
+    let lat: Vec<f64> = rec
+        .timing
+        .iter()
+        .filter(|t| !t.timing.missed && t.timing.torque_receive_wall_ns != 0)
+        .map(|t| t.timing.round_trip_ns as f64 * 1e-3)
+        .collect();
+    if let Some(p) = n.latency_us {
+        let h = Histogram {
+            title: format!("Round-trip latency: p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} ticks)", p.p50, p.p99, p.max, p.n),
+            x_label: "publish -> torque received [us]".into(),
+            bins: plots::bin(&lat, 0.0, p.max * 1.02, 80),
+        };
+        files.figures.extend(plots::save_histogram(&h, &out_dir.join("latency_histogram"))?);
+    }
+    Ok((n, files))
+}

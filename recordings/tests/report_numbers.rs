@@ -62,3 +62,33 @@ fn report_on_a_known_recording_gives_the_known_numbers() {
     let text = report::format_text(&n);
     assert!(text.contains("misses      3") && text.contains("safe stops  1") && text.contains("75.0 %"), "{text}");
 }
+
+#[test]
+fn report_writes_text_json_and_every_figure() {
+    let run = SyntheticRun { ticks: 2600, ..Default::default() };
+    let dir = std::env::temp_dir().join(format!("recordings-report-files-{}", std::process::id()));
+    let path = dir.join("figs.mcap");
+    let mut cfg = RecorderConfig::new(&path);
+    cfg.metadata = run.metadata();
+    run.record(cfg).unwrap();
+    let rec = Recording::open_complete(&path).unwrap();
+    let out = dir.join("report");
+    let (n, files) = report::write_report(&rec, &out, &[]).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&files.json).unwrap()).unwrap();
+    assert_eq!(json["ticks"], 2600);
+    assert_eq!(json["misses"], n.misses);
+    assert!(std::fs::read_to_string(&files.text).unwrap().contains("safe stops  1"));
+    for stem in ["force_tracking", "bottom_pressure", "joint_torques", "latency_histogram"] {
+        for ext in ["png", "svg"] {
+            let f = out.join(format!("{stem}.{ext}"));
+            assert!(files.figures.contains(&f), "{} missing from {:?}", f.display(), files.figures);
+            assert!(std::fs::metadata(&f).unwrap().len() > 1000, "{} is empty", f.display());
+        }
+    }
+    // Default instants: the wheel at 10..90 % of its roll, in order.
+    let inst = report::default_instants(&rec);
+    assert_eq!(inst.len(), 5);
+    assert!(inst.windows(2).all(|w| w[0] < w[1]));
+    let svg = std::fs::read_to_string(out.join("bottom_pressure.svg")).unwrap();
+    assert!(svg.contains("100 kPa bond pressure") && svg.contains("wheel at"), "legend missing");
+}
