@@ -1,1 +1,215 @@
-fn main() {}
+//! `rig`: the user's front door to the weatherstrip rig.
+//!
+//! - `rig run [SCENARIO.toml] [--mode realtime|lockstep] [--controller PATH] [--duration S] [--out DIR]`
+//!   starts `plant-sim` and a controller on a fresh rig name, supervises them and prints a summary.
+//! - `rig timing [--seconds N]`: a real-time timing run with latency and jitter distributions.
+//! - `rig robot ...`: checks of the robot model (see `robot::cli`).
+
+mod summary;
+mod supervise;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use supervise::{Ending, RigLaunch};
+
+#[derive(Debug, Parser)]
+#[command(name = "rig", about = "Hardware-in-the-loop rig for weatherstrip force control: plant + controller over iceoryx2 at 1 kHz")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// Run a scenario: start plant-sim and the controller, supervise them, print a summary.
+    Run(RunArgs),
+    /// Real-time timing run: round-trip latency, tick-period jitter, misses, compute times.
+    Timing(TimingArgs),
+    /// Robot model tools.
+    Robot {
+        #[command(subcommand)]
+        cmd: robot::cli::Command,
+    },
+    // TODO(rig): `model` (strip::cli), `replay`/`report` (recordings::cli) and `design` are wired
+    // in as those modules land.
+}
+
+#[derive(Debug, clap::Args)]
+struct RunArgs {
+    /// Scenario file (default: scenarios/default.toml).
+    scenario: Option<PathBuf>,
+    /// Loop mode, overriding the scenario's.
+    #[arg(long, value_parser = ["realtime", "lockstep"])]
+    mode: Option<String>,
+    /// Controller executable (default: `controller` next to `rig`). Any program that takes
+    /// `--rig NAME --scenario FILE` and speaks the contract of messages/README.md.
+    #[arg(long)]
+    controller: Option<PathBuf>,
+    /// Simulated seconds to run (default: the scenario's).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Output directory (default: runs/<UTC time>-<rig>/); the recording is <DIR>/run.mcap.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+struct TimingArgs {
+    /// Length of the timing run, s.
+    #[arg(long, default_value_t = 10.0)]
+    seconds: f64,
+    /// Scenario (default: the default scenario without the strip, holding its start pose).
+    #[arg(long)]
+    scenario: Option<PathBuf>,
+    #[arg(long)]
+    controller: Option<PathBuf>,
+    /// Output directory (default: runs/<UTC time>-<rig>/).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Also write the plant's summary JSON (all distributions) to this file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+/// UTC time as `YYYYmmdd-HHMMSS`.
+fn utc_stamp() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs()) as libc::time_t;
+    // SAFETY: gmtime_r writes into the tm we own.
+    let tm = unsafe {
+        let mut tm: libc::tm = std::mem::zeroed();
+        libc::gmtime_r(&secs, &mut tm);
+        tm
+    };
+    format!("{:04}{:02}{:02}-{:02}{:02}{:02}", tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec)
+}
+
+fn prepare(
+    rig: String,
+    scenario: PathBuf,
+    mode: Option<String>,
+    duration_s: Option<f64>,
+    out: Option<PathBuf>,
+    controller: Option<PathBuf>,
+) -> anyhow::Result<RigLaunch> {
+    // Fail early, with file/line/field, before any process starts.
+    scenario::Scenario::load(&scenario)?;
+    let dir = out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating output directory {}", dir.display()))?;
+    let plant_bin = supervise::sibling_binary("plant-sim")?;
+    let controller_bin = match controller {
+        Some(p) => {
+            anyhow::ensure!(p.is_file(), "controller {} does not exist", p.display());
+            p
+        }
+        None => supervise::sibling_binary("controller")?,
+    };
+    let cache_dir = plant_bin.parent().map_or_else(|| PathBuf::from("strip-cache"), |d| d.join("strip-cache"));
+    Ok(RigLaunch {
+        rig,
+        scenario,
+        mode,
+        duration_s,
+        recording: dir.join("run.mcap"),
+        plant_bin,
+        controller_bin,
+        cache_dir,
+    })
+}
+
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the tokio runtime")
+}
+
+/// Supervise, print the summary (or the failure), return the exit code.
+fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> anyhow::Result<i32> {
+    eprintln!(
+        "rig {}: plant {} + controller {}, scenario {}",
+        l.rig,
+        l.plant_bin.display(),
+        l.controller_bin.display(),
+        l.scenario.display()
+    );
+    let outcome = runtime()?.block_on(supervise::supervise(l))?;
+    match &outcome.plant_summary {
+        Some(v) => {
+            if timing {
+                print!("{}", summary::timing_report(v));
+            }
+            print!("{}", summary::run_summary(v));
+            if let Some(p) = json_out {
+                std::fs::write(p, serde_json::to_string_pretty(v)?).with_context(|| format!("writing {}", p.display()))?;
+            }
+        }
+        None => eprintln!("rig: the plant printed no summary"),
+    }
+    match &outcome.ending {
+        Ending::Completed => {}
+        Ending::Interrupted => eprintln!("rig: interrupted; both daemons stopped"),
+        Ending::PlantFailed(why) => eprintln!("rig: PLANT FAILED: {why}"),
+        Ending::ControllerFailed(why) => eprintln!("rig: CONTROLLER FAILED: {why}"),
+    }
+    Ok(outcome.ending.exit_code())
+}
+
+/// The timing scenario: the default one without the strip, holding the start pose (no approach),
+/// in real-time mode, written next to the recording.
+fn timing_scenario(dir: &Path) -> anyhow::Result<PathBuf> {
+    let default = scenario::Scenario::default_file();
+    let text = std::fs::read_to_string(&default).with_context(|| format!("reading {}", default.display()))?;
+    let mut doc: toml::Table = text.parse().with_context(|| format!("parsing {}", default.display()))?;
+    let table = |doc: &mut toml::Table, k: &str| -> toml::Table {
+        doc.remove(k).and_then(|v| v.as_table().cloned()).unwrap_or_default()
+    };
+    let mut strip = table(&mut doc, "strip");
+    strip.insert("enabled".into(), false.into());
+    doc.insert("strip".into(), strip.into());
+    let mut lp = table(&mut doc, "loop");
+    lp.insert("mode".into(), "realtime".into());
+    doc.insert("loop".into(), lp.into());
+    let mut tr = table(&mut doc, "trajectory");
+    // Hold the start pose for the whole run: the loop's timing, not the task, is under test.
+    tr.insert("settle_s".into(), 1.0e6.into());
+    doc.insert("trajectory".into(), tr.into());
+    doc.insert("description".into(), "rig timing: default robot and controller, no strip, holding the start pose".into());
+    std::fs::create_dir_all(dir)?;
+    let path = dir.join("timing.toml");
+    std::fs::write(&path, toml::to_string(&doc)?).with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.cmd {
+        Cmd::Run(a) => (|| {
+            let rig = supervise::unique_rig_name();
+            let scenario = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
+            let l = prepare(rig, scenario, a.mode, a.duration, a.out, a.controller)?;
+            launch_and_report(&l, false, None)
+        })(),
+        Cmd::Timing(a) => (|| {
+            anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
+            let rig = supervise::unique_rig_name();
+            let dir = a.out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
+            let scenario = match a.scenario {
+                Some(s) => s,
+                None => timing_scenario(&dir)?,
+            };
+            let l = prepare(rig, scenario, Some("realtime".into()), Some(a.seconds), Some(dir), a.controller)?;
+            launch_and_report(&l, true, a.json.as_deref())
+        })(),
+        Cmd::Robot { cmd } => robot::cli::run(cmd).map(|_| 0),
+    };
+    match result {
+        Ok(code) => std::process::exit(code),
+        Err(e) => {
+            eprintln!("rig: error: {e:#}");
+            std::process::exit(1);
+        }
+    }
+}

@@ -59,6 +59,10 @@ pub struct LoopStats {
     pub controller_compute: Histogram,
     pub wall_s: f64,
     pub sim_s: f64,
+    /// Wall and simulated time from the first controller answer to the end (the speed factor's
+    /// basis: start-up waits for the controller are excluded).
+    pub active_wall_s: f64,
+    pub active_sim_s: f64,
     pub stopped_by_signal: bool,
 }
 
@@ -95,6 +99,8 @@ pub struct PlantLoop<'a> {
     pub gate: &'a mut Gate,
     pub recorder: Option<&'a mut Recorder>,
     pub params: LoopParams,
+    /// Tick of the last miss/refusal log line (rate limit: one per second of ticks).
+    pub last_log_tick: Option<u64>,
 }
 
 /// How long a lockstep plant republishes the waiting state while no controller has answered yet.
@@ -146,20 +152,30 @@ impl PlantLoop<'_> {
     /// Turn the gate's rare events into recorded events and log lines.
     fn report(&mut self, tick: u64, t: f64, d: &Decision, prev_refused: bool) {
         let e = d.events;
+        // A flapping controller starts a streak every few ticks: record each, log one per second.
+        let ticks_per_s = 1_000_000_000 / self.params.period_ns.max(1);
+        let may_log = self.last_log_tick.is_none_or(|l| tick >= l + ticks_per_s);
+        if may_log && (e.miss_streak_started || (d.refused.is_some() && !prev_refused)) {
+            self.last_log_tick = Some(tick);
+        }
         if let Some(r) = d.refused {
             // Log and record the first refusal of a streak only (a bad controller refuses every tick).
             if !prev_refused {
                 let mut s = StackText::new();
                 let _ = write!(s, "tick {tick}: {r}");
                 let kind = if matches!(r, crate::gate::Refusal::Version(_)) { EventKind::VersionMismatch } else { EventKind::TorqueRefused };
-                tracing::warn!("{}", s.as_str());
+                if may_log {
+                    tracing::warn!("{}", s.as_str());
+                }
                 self.event(tick, t, kind, s.as_str());
             }
         }
         if e.miss_streak_started {
             let mut s = StackText::new();
             let _ = write!(s, "tick {tick}: no valid torque in time, holding the last one");
-            tracing::warn!("{}", s.as_str());
+            if may_log {
+                tracing::warn!("{} (total misses {})", s.as_str(), self.gate.total_misses());
+            }
             self.event(tick, t, EventKind::Miss, s.as_str());
         }
         if e.safe_stop_entered {
@@ -220,6 +236,8 @@ impl PlantLoop<'_> {
             controller_compute: Histogram::for_latency(),
             wall_s: 0.0,
             sim_s: 0.0,
+            active_wall_s: 0.0,
+            active_sim_s: 0.0,
             stopped_by_signal: false,
         };
         // One reference instant for both clocks: Instant is CLOCK_MONOTONIC on Linux.
@@ -231,6 +249,8 @@ impl PlantLoop<'_> {
         let mut last_publish_ns: u64 = 0;
         let mut tick: u64 = 0;
         let mut strip = StripRecord::default();
+        // (wake time, tick) of the first tick a controller answered.
+        let mut first_answer: Option<(u64, u64)> = None;
 
         while tick < p.n_ticks {
             if rt::stop_requested() {
@@ -261,7 +281,7 @@ impl PlantLoop<'_> {
             let state = self.state(tick, prev.as_ref());
             let wrench = self.wrench(tick);
             let publish_wall_ns = rt::now_wall_ns();
-            let publish_ns = rt::now_mono_ns();
+            let mut publish_ns = rt::now_mono_ns();
             if let Err(e) = self.ports.publish(&state, &wrench) {
                 tracing::error!("{e}");
                 self.event(tick, sim_t, EventKind::Fault, "publishing the state failed");
@@ -285,6 +305,7 @@ impl PlantLoop<'_> {
                         break;
                     }
                     let _ = self.ports.publish(&state, &wrench);
+                    publish_ns = rt::now_mono_ns();
                 }
                 got
             } else {
@@ -295,6 +316,9 @@ impl PlantLoop<'_> {
                 break;
             }
             let recv_ns = rt::now_mono_ns();
+            if torque.is_some() && first_answer.is_none() {
+                first_answer = Some((publish_ns, tick));
+            }
             let recv_wall_ns = if torque.is_some() { rt::now_wall_ns() } else { 0 };
             let diag = self.ports.receive_diagnostics().filter(|d| d.tick == tick);
 
@@ -370,6 +394,10 @@ impl PlantLoop<'_> {
         stats.refusals = self.gate.refusals();
         stats.wall_s = (rt::now_mono_ns() - origin_ns) as f64 * 1e-9;
         stats.sim_s = self.physics.time_s();
+        if let Some((t0, k0)) = first_answer {
+            stats.active_wall_s = (rt::now_mono_ns() - t0) as f64 * 1e-9;
+            stats.active_sim_s = (tick - k0) as f64 * p.period_ns as f64 * 1e-9;
+        }
 
         // Goodbye: the last state says ShuttingDown so controllers exit.
         let mut last = self.state(tick, prev.as_ref());

@@ -69,7 +69,7 @@ impl RunSummary {
             "drops": self.drops,
             "wall_s": s.wall_s,
             "sim_s": s.sim_s,
-            "speed_factor": if s.wall_s > 0.0 { s.sim_s / s.wall_s } else { 0.0 },
+            "speed_factor": if s.active_wall_s > 0.0 { s.active_sim_s / s.active_wall_s } else { 0.0 },
             "stopped_by_signal": s.stopped_by_signal,
             "sched_fifo": self.rt.sched_fifo,
             "mlockall": self.rt.mlockall,
@@ -166,7 +166,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         r.record_event(&EventRecord::new(0, 0.0, EventKind::Start, &text));
     }
 
-    let stats = PlantLoop { ports: &ports, physics: &mut physics, gate: &mut gate, recorder: recorder.as_mut(), params }.run();
+    let stats = PlantLoop { ports: &ports, physics: &mut physics, gate: &mut gate, recorder: recorder.as_mut(), params, last_log_tick: None }.run();
     let drops = recorder.as_ref().map_or(0, |r| r.dropped());
     if let Some(r) = recorder {
         r.finish().context("finishing the recording")?;

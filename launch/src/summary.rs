@@ -1,0 +1,133 @@
+//! Human-readable summaries of a run and of a timing run, from the plant's JSON summary line.
+
+use serde_json::Value;
+
+fn num(v: &Value, key: &str) -> f64 {
+    v.get(key).and_then(Value::as_f64).unwrap_or(f64::NAN)
+}
+
+fn int(v: &Value, key: &str) -> u64 {
+    v.get(key).and_then(Value::as_u64).unwrap_or(0)
+}
+
+/// The summary of `rig run`: ticks, misses, safe stops, round-trip latency p50/p99/max, recording.
+pub fn run_summary(v: &Value) -> String {
+    let mut s = String::new();
+    let rec = v.get("recording").and_then(Value::as_str).unwrap_or("(not recorded)");
+    s += &format!(
+        "ticks {}  misses {}  safe stops {}  refused {}  overruns {}  recorder drops {}\n",
+        int(v, "ticks"),
+        int(v, "misses"),
+        int(v, "safe_stops"),
+        int(v, "refusals"),
+        int(v, "overruns"),
+        int(v, "drops")
+    );
+    s += &format!(
+        "round trip  p50 {:.1} us  p99 {:.1} us  max {:.1} us\n",
+        num(v, "rt_p50_us"),
+        num(v, "rt_p99_us"),
+        num(v, "rt_max_us")
+    );
+    s += &format!(
+        "mode {}  simulated {:.3} s in {:.3} s wall ({:.1}x real time)\n",
+        v.get("mode").and_then(Value::as_str).unwrap_or("?"),
+        num(v, "sim_s"),
+        num(v, "wall_s"),
+        num(v, "speed_factor")
+    );
+    s += &format!("recording {rec}\n");
+    s
+}
+
+/// One distribution line: p50/p90/p99/p99.9/max in µs.
+fn dist_line(name: &str, d: &Value) -> String {
+    format!(
+        "{name:<22} n {:>7}  p50 {:>8.1}  p90 {:>8.1}  p99 {:>8.1}  p99.9 {:>8.1}  max {:>8.1}  (us)\n",
+        int(d, "count"),
+        num(d, "p50_us"),
+        num(d, "p90_us"),
+        num(d, "p99_us"),
+        num(d, "p999_us"),
+        num(d, "max_us")
+    )
+}
+
+/// ASCII histogram of a distribution's bins (log-scaled bars, counts printed).
+pub fn ascii_histogram(d: &Value, width: usize) -> String {
+    let mut s = String::new();
+    let Some(bins) = d.get("bins").and_then(Value::as_array) else { return s };
+    let counts: Vec<u64> = bins.iter().map(|b| b.get(2).and_then(Value::as_u64).unwrap_or(0)).collect();
+    let max = counts.iter().copied().max().unwrap_or(0).max(1) as f64;
+    for (b, &c) in bins.iter().zip(counts.iter()) {
+        let lo = b.get(0).and_then(Value::as_f64).unwrap_or(0.0);
+        let label = match b.get(1).and_then(Value::as_f64) {
+            Some(hi) => format!("{lo:>6.0}-{hi:<6.0}us"),
+            None => format!("{lo:>6.0}+      us"),
+        };
+        let bar = if c == 0 { 0 } else { (((c as f64).ln_1p() / max.ln_1p()) * width as f64).ceil() as usize };
+        s += &format!("  {label} |{:<width$}| {c}\n", "#".repeat(bar));
+    }
+    s
+}
+
+/// The report of `rig timing`.
+pub fn timing_report(v: &Value) -> String {
+    let mut s = String::new();
+    let ticks = int(v, "ticks");
+    let misses = int(v, "misses");
+    s += &format!(
+        "timing run: {} ticks in {:.1} s wall, misses {} ({:.2e} of ticks), overruns (skipped periods) {}, SCHED_FIFO {}, mlockall {}\n",
+        ticks,
+        num(v, "wall_s"),
+        misses,
+        if ticks > 0 { misses as f64 / ticks as f64 } else { 0.0 },
+        int(v, "overruns"),
+        v.get("sched_fifo").and_then(Value::as_bool).unwrap_or(false),
+        v.get("mlockall").and_then(Value::as_bool).unwrap_or(false),
+    );
+    for (key, name) in [
+        ("round_trip", "round trip"),
+        ("jitter", "period jitter |T-1ms|"),
+        ("plant_compute", "plant compute/tick"),
+        ("controller_compute", "controller compute"),
+    ] {
+        if let Some(d) = v.get(key) {
+            s += &dist_line(name, d);
+        }
+    }
+    for (key, name) in [("round_trip", "round-trip latency"), ("jitter", "tick-period jitter")] {
+        if let Some(d) = v.get(key) {
+            s += &format!("{name} histogram (bar length ~ log count):\n");
+            s += &ascii_histogram(d, 40);
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn summary_names_every_required_number() {
+        let v = serde_json::json!({"ticks": 1200, "misses": 3, "safe_stops": 1, "rt_p50_us": 21.5, "rt_p99_us": 60.25,
+            "rt_max_us": 140.0, "recording": "runs/x/run.mcap", "drops": 0, "mode": "lockstep", "sim_s": 1.2, "wall_s": 0.05, "speed_factor": 24.0});
+        let s = run_summary(&v);
+        for needle in ["ticks 1200", "misses 3", "safe stops 1", "p50 21.5", "p99 60.2", "max 140.0", "runs/x/run.mcap", "24.0x"] {
+            assert!(s.contains(needle), "{needle:?} missing in {s}");
+        }
+    }
+
+    #[test]
+    fn histogram_bars_grow_with_counts_and_show_them() {
+        let d = serde_json::json!({"bins": [[0.0, 10.0, 1000], [10.0, 20.0, 10], [20.0, null, 0]]});
+        let h = ascii_histogram(&d, 20);
+        let lines: Vec<&str> = h.lines().collect();
+        let bars: Vec<usize> = lines.iter().map(|l| l.matches('#').count()).collect();
+        assert_eq!(bars[0], 20);
+        assert!(bars[1] > 0 && bars[1] < bars[0]);
+        assert_eq!(bars[2], 0);
+        assert!(lines[0].ends_with("1000") && lines[2].contains("20+"));
+    }
+}

@@ -1,0 +1,213 @@
+//! Start `plant-sim` and a controller as two processes on one rig, supervise them, stop them
+//! cleanly. tokio lives here only (child processes, signals, timeouts), never in the 1 kHz loops.
+
+use std::path::{Path, PathBuf};
+use std::process::{ExitStatus, Stdio};
+use std::time::Duration;
+
+use anyhow::Context;
+use tokio::io::AsyncReadExt;
+use tokio::process::{Child, Command};
+use tokio::signal::unix::{signal, SignalKind};
+
+/// What to start.
+#[derive(Debug, Clone)]
+pub struct RigLaunch {
+    pub rig: String,
+    pub scenario: PathBuf,
+    pub mode: Option<String>,
+    pub duration_s: Option<f64>,
+    pub recording: PathBuf,
+    pub plant_bin: PathBuf,
+    pub controller_bin: PathBuf,
+    pub cache_dir: PathBuf,
+}
+
+/// How a supervised run ended.
+#[derive(Debug)]
+pub enum Ending {
+    /// The plant reached its duration and both exited 0.
+    Completed,
+    /// The user pressed Ctrl-C (or rig got SIGTERM); both were stopped cleanly.
+    Interrupted,
+    /// The plant failed (non-zero exit or killed); the controller was stopped.
+    PlantFailed(String),
+    /// The controller exited while the plant still ran; the plant was stopped cleanly.
+    ControllerFailed(String),
+}
+
+impl Ending {
+    /// Process exit code of `rig run` for this ending.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            Ending::Completed => 0,
+            Ending::PlantFailed(_) => 2,
+            Ending::ControllerFailed(_) => 3,
+            Ending::Interrupted => 130,
+        }
+    }
+}
+
+/// Result of a supervised run: the ending, and the plant's JSON summary line if it printed one.
+#[derive(Debug)]
+pub struct Outcome {
+    pub ending: Ending,
+    pub plant_summary: Option<serde_json::Value>,
+}
+
+/// Unique rig name for this process: `r<pid>-<nanoseconds>`.
+pub fn unique_rig_name() -> String {
+    let n = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    format!("r{}-{}", std::process::id(), n % 1_000_000_000_000)
+}
+
+/// A binary next to the running `rig` executable (cargo puts all workspace bins there).
+pub fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe().context("locating the rig executable")?;
+    let dir = exe.parent().context("rig executable has no parent directory")?;
+    let p = dir.join(name);
+    anyhow::ensure!(
+        p.is_file(),
+        "{} not found next to {} (build it with `cargo build --release --workspace --bins`)",
+        p.display(),
+        exe.display()
+    );
+    Ok(p)
+}
+
+fn describe(status: ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    match (status.code(), status.signal()) {
+        (Some(c), _) => format!("exit status {c}"),
+        (None, Some(s)) => format!("killed by signal {s}"),
+        _ => "unknown status".into(),
+    }
+}
+
+fn send_signal(child: &Child, sig: i32) {
+    if let Some(pid) = child.id() {
+        // SAFETY: signalling a child we spawned and have not reaped.
+        unsafe { libc::kill(pid as i32, sig) };
+    }
+}
+
+/// SIGTERM, wait up to `grace`, then SIGKILL. Returns the exit status.
+async fn stop(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
+    if let Ok(Some(s)) = child.try_wait() {
+        return Some(s);
+    }
+    send_signal(child, libc::SIGTERM);
+    match tokio::time::timeout(grace, child.wait()).await {
+        Ok(Ok(s)) => Some(s),
+        _ => {
+            let _ = child.kill().await;
+            child.wait().await.ok()
+        }
+    }
+}
+
+/// Wait for a child to exit by itself for `grace`, then stop it.
+async fn await_or_stop(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
+    match tokio::time::timeout(grace, child.wait()).await {
+        Ok(Ok(s)) => Some(s),
+        _ => stop(child, Duration::from_secs(3)).await,
+    }
+}
+
+fn spawn(cmd: &mut Command, what: &str, bin: &Path) -> anyhow::Result<Child> {
+    // Own process group: a terminal Ctrl-C reaches rig only, which then stops the plant first so
+    // the controller sees the plant's goodbye instead of dying at the same instant.
+    cmd.process_group(0).kill_on_drop(true).stdin(Stdio::null());
+    cmd.spawn().with_context(|| format!("starting the {what} {}", bin.display()))
+}
+
+/// Start both daemons and supervise them until the run ends.
+pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
+    let mut plant_cmd = Command::new(&l.plant_bin);
+    plant_cmd
+        .arg("--rig")
+        .arg(&l.rig)
+        .arg("--scenario")
+        .arg(&l.scenario)
+        .arg("--out")
+        .arg(&l.recording)
+        .arg("--cache-dir")
+        .arg(&l.cache_dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    if let Some(m) = &l.mode {
+        plant_cmd.arg("--mode").arg(m);
+    }
+    if let Some(d) = l.duration_s {
+        plant_cmd.arg("--duration").arg(d.to_string());
+    }
+    let mut plant = spawn(&mut plant_cmd, "plant", &l.plant_bin)?;
+    let mut plant_out = plant.stdout.take().context("plant stdout")?;
+    let reader = tokio::spawn(async move {
+        let mut s = String::new();
+        let _ = plant_out.read_to_string(&mut s).await;
+        s
+    });
+
+    let mut ctrl_cmd = Command::new(&l.controller_bin);
+    ctrl_cmd.arg("--rig").arg(&l.rig).arg("--scenario").arg(&l.scenario).stdout(Stdio::inherit()).stderr(Stdio::inherit());
+    let mut controller = match spawn(&mut ctrl_cmd, "controller", &l.controller_bin) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = stop(&mut plant, Duration::from_secs(5)).await;
+            return Err(e);
+        }
+    };
+
+    let mut sigint = signal(SignalKind::interrupt())?;
+    let mut sigterm = signal(SignalKind::terminate())?;
+    let ending = tokio::select! {
+        biased;
+        s = plant.wait() => {
+            let s = s?;
+            // The plant said goodbye (ShuttingDown) or died; the controller must exit by itself
+            // within 100 ms of silence, so 2 s is generous.
+            let c = await_or_stop(&mut controller, Duration::from_secs(2)).await;
+            if s.success() {
+                match c {
+                    Some(c) if c.success() => Ending::Completed,
+                    Some(c) => Ending::ControllerFailed(format!("controller ended with {} after the plant finished", describe(c))),
+                    None => Ending::ControllerFailed("controller could not be reaped".into()),
+                }
+            } else {
+                Ending::PlantFailed(format!("plant-sim ended with {}; controller stopped", describe(s)))
+            }
+        }
+        c = controller.wait() => {
+            let c = c?;
+            // A controller exits 0 only after the plant's goodbye: then the plant is finishing too.
+            let p = if c.success() {
+                await_or_stop(&mut plant, Duration::from_secs(5)).await
+            } else {
+                stop(&mut plant, Duration::from_secs(10)).await
+            };
+            if c.success() && p.is_some_and(|p| p.success()) {
+                Ending::Completed
+            } else {
+                Ending::ControllerFailed(format!(
+                "controller ended early with {}; plant stopped cleanly ({})",
+                describe(c),
+                p.map_or("not reaped".to_string(), describe)
+            ))
+            }
+        }
+        _ = sigint.recv() => {
+            stop(&mut plant, Duration::from_secs(10)).await;
+            await_or_stop(&mut controller, Duration::from_secs(2)).await;
+            Ending::Interrupted
+        }
+        _ = sigterm.recv() => {
+            stop(&mut plant, Duration::from_secs(10)).await;
+            await_or_stop(&mut controller, Duration::from_secs(2)).await;
+            Ending::Interrupted
+        }
+    };
+    let out = tokio::time::timeout(Duration::from_secs(5), reader).await.ok().and_then(|r| r.ok()).unwrap_or_default();
+    let plant_summary = out.lines().rev().find_map(|line| serde_json::from_str::<serde_json::Value>(line).ok());
+    Ok(Outcome { ending, plant_summary })
+}

@@ -1,0 +1,25 @@
+//! Cost of one plant tick (robot only): `loop.substeps` RK4 steps of the forward dynamics. The
+//! lockstep speed target (20x real time) leaves ~50 µs per tick for plant + controller + IPC.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use plant_sim::physics::Physics;
+use std::path::Path;
+
+fn step_tick(c: &mut Criterion) {
+    let mut s = scenario::Scenario::default();
+    s.strip.enabled = false;
+    let mut p = Physics::new(&s, Path::new("/nonexistent")).unwrap();
+    c.bench_function("physics.step_tick (robot only, default substeps)", |b| {
+        b.iter(|| {
+            let tau = p.gravity_torque();
+            p.step_tick(std::hint::black_box(&tau));
+        })
+    });
+    let robot = p.robot().clone();
+    let (q, qd) = (p.q(), p.qd());
+    let tau = p.gravity_torque();
+    c.bench_function("robot.forward_dynamics", |b| b.iter(|| robot.forward_dynamics(std::hint::black_box(&q), &qd, &tau)));
+}
+
+criterion_group!(benches, step_tick);
+criterion_main!(benches);

@@ -1,0 +1,103 @@
+//! `hold-controller --rig NAME --scenario FILE [--contract-version N] [--offset-nm X]`
+//!
+//! A second, deliberately simple controller binary: joint-space computed torque
+//! `τ = M(q)(Kp e − Kd q̇) + C(q, q̇) q̇ + g(q)` (via RNEA) holding the joint position of the first
+//! state it sees; every joint then behaves as a critically damped 10 Hz unit mass. It exists to show (and test) that any
+//! program speaking the contract can drive the plant, and that a *different* controller binary can
+//! take over a running plant. It links only `messages` and `robot` (for g(q)), not the plant loop.
+
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use messages::ports::{ControllerPorts, Wake};
+use messages::{ControllerDiagnostics, ControllerStatus, JointTorque, PlantStatus, CONTRACT_VERSION};
+use robot::Vec6;
+
+#[derive(Debug, Parser)]
+struct Args {
+    #[arg(long)]
+    rig: String,
+    #[arg(long)]
+    scenario: std::path::PathBuf,
+    /// Pretend to speak another contract version (testing the refusal).
+    #[arg(long, default_value_t = CONTRACT_VERSION)]
+    contract_version: u32,
+    /// Constant torque added to joint 1, N m (to make this controller's output recognisable).
+    #[arg(long, default_value_t = 0.0)]
+    offset_nm: f64,
+}
+
+/// Closed-loop natural frequency (rad/s) and damping ratio of every joint: ω T = 0.06 at 1 kHz.
+const OMEGA: f64 = 2.0 * std::f64::consts::PI * 10.0;
+const ZETA: f64 = 1.0;
+
+fn main() {
+    let a = Args::parse();
+    match run(&a) {
+        Ok(()) => {}
+        Err(e) => {
+            eprintln!("hold-controller: error: {e:#}");
+            std::process::exit(1);
+        }
+    }
+}
+
+fn run(a: &Args) -> anyhow::Result<()> {
+    let s = scenario::Scenario::load(&a.scenario)?;
+    let robot = robot::Robot::irb2400_with_tool(plant_sim::physics::tool_from_scenario(&s))
+        .with_armature(Vec6::from(s.robot.armature_kgm2))
+        .with_viscous(Vec6::from(s.robot.viscous_nms));
+    messages::ports::clean_dead_nodes();
+    let ports = ControllerPorts::open(&a.rig, "hold-controller")?;
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
+    let id = ((std::process::id() as u64) << 32) | nanos as u64;
+    let mut hold: Option<Vec6> = None;
+    let mut last_state = Instant::now();
+    loop {
+        // Wake on the plant's notification; a timeout only serves the dead-plant check.
+        let _: Wake = ports.wait_state(Instant::now() + Duration::from_millis(20));
+        let Some(st) = ports.receive_state() else {
+            if hold.is_some() && last_state.elapsed() > Duration::from_millis(100) {
+                anyhow::bail!("plant on rig {:?} is silent for 100 ms: assuming it is dead", a.rig);
+            }
+            continue;
+        };
+        let t0 = Instant::now();
+        last_state = t0;
+        if st.contract_version != a.contract_version {
+            anyhow::bail!(
+                "{}",
+                messages::check_version(a.contract_version, st.contract_version, "joint state").unwrap_err()
+            );
+        }
+        if st.plant_status == PlantStatus::ShuttingDown as u32 {
+            return Ok(());
+        }
+        let q = Vec6::from(st.q);
+        let qd = Vec6::from(st.qd);
+        let q_ref = *hold.get_or_insert(q);
+        let qdd = (q_ref - q) * (OMEGA * OMEGA) - qd * (2.0 * ZETA * OMEGA);
+        let mut tau = robot.rnea(&q, &qd, &qdd);
+        tau[0] += a.offset_nm;
+        let t = JointTorque {
+            contract_version: a.contract_version,
+            controller_status: ControllerStatus::Active as u32,
+            tick: st.tick,
+            controller_id: id,
+            tau: tau.into(),
+        };
+        let d = ControllerDiagnostics {
+            contract_version: a.contract_version,
+            force_control_active: 0,
+            tick: st.tick,
+            force_ref_n: 0.0,
+            force_meas_n: 0.0,
+            pos_ref_task_m: [0.0; 3],
+            pos_err_task_m: [0.0; 3],
+            rot_err_task_rad: [0.0; 3],
+            force_integral_ns: 0.0,
+            compute_time_ns: t0.elapsed().as_nanos() as u64,
+        };
+        ports.publish(&t, Some(&d))?;
+    }
+}
