@@ -1,1 +1,130 @@
-//! (in progress)
+//! The `rig replay` and `rig report` subcommands (the `rig` binary in `launch` wires them) and the
+//! numbers `rig run` prints at its end.
+
+use crate::read::Recording;
+use crate::report::{self, ReportNumbers};
+use anyhow::Context;
+use std::path::{Path, PathBuf};
+
+/// `rig report FILE [--out DIR]`: numbers as text and JSON, figures as PNG and SVG.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ReportArgs {
+    /// The recording (.mcap).
+    pub file: PathBuf,
+    /// Folder for report.txt, report.json and the figures (default: `<FILE without .mcap>-report/`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Simulated times (s) of the bottom-pressure figure, comma-separated
+    /// (default: the wheel at 10, 30, 50, 70 and 90 % of its roll).
+    #[arg(long, value_delimiter = ',')]
+    pub instants: Vec<f64>,
+    /// Report a truncated file (a killed run) from its complete chunks instead of refusing it.
+    #[arg(long)]
+    pub allow_truncated: bool,
+}
+
+/// `rig replay FILE [--speed X] [--controller PATH]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ReplayArgs {
+    /// The recording (.mcap).
+    pub file: PathBuf,
+    /// Republish at X times the recorded rate. Default: lockstep (wait for each torque, as fast as
+    /// the controller answers) when --controller is given, else the recorded rate (1).
+    #[arg(long)]
+    pub speed: Option<f64>,
+    /// Controller executable to drive open-loop from the recording and compare with the recorded
+    /// torques (it is started as `PATH --rig NAME --scenario FILE`; `--controller` alone or
+    /// `--controller auto` takes the `controller` next to this executable). Without it, replay only republishes; a controller
+    /// you start yourself on the printed rig name is compared too.
+    #[arg(long, num_args = 0..=1, default_missing_value = "auto")]
+    pub controller: Option<PathBuf>,
+    /// Scenario file for the controller (default: the scenario stored in the recording).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Rig name to publish on (default: a fresh `replay-<pid>`).
+    #[arg(long)]
+    pub rig: Option<String>,
+    /// Longest wait for one torque in lockstep, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub watchdog: f64,
+    /// Also write the comparison as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Replay a truncated file (a killed run) up to its last complete chunk instead of refusing it.
+    #[arg(long)]
+    pub allow_truncated: bool,
+}
+
+/// Opens a recording for a command: a truncated file is an error unless `allow_truncated`.
+pub fn open_for(path: &Path, allow_truncated: bool) -> anyhow::Result<Recording> {
+    let rec = Recording::open(path)?;
+    if let Some(e) = rec.truncation_error() {
+        if !allow_truncated {
+            return Err(anyhow::Error::new(e).context("pass --allow-truncated to use its complete chunks"));
+        }
+        tracing::warn!("{e}; using its complete chunks");
+    }
+    Ok(rec)
+}
+
+pub fn report(args: ReportArgs) -> anyhow::Result<()> {
+    let rec = open_for(&args.file, args.allow_truncated)?;
+    let out = args.out.clone().unwrap_or_else(|| default_report_dir(&args.file));
+    let (numbers, files) = report::write_report(&rec, &out, &args.instants)
+        .with_context(|| format!("writing the report of {}", args.file.display()))?;
+    print!("{}", report::format_text(&numbers));
+    println!("report      {} and {}", files.text.display(), files.json.display());
+    for f in &files.figures {
+        println!("figure      {}", f.display());
+    }
+    Ok(())
+}
+
+/// `<dir>/<stem>-report/` next to the recording.
+pub fn default_report_dir(file: &Path) -> PathBuf {
+    let stem = file.file_stem().map_or("recording".into(), |s| s.to_string_lossy().into_owned());
+    file.with_file_name(format!("{stem}-report"))
+}
+
+/// The report's numbers of a recording, for `rig run` to print at its end (with
+/// [`report::format_text`]). A truncated file is read up to its last complete chunk; the numbers'
+/// `truncated` field says so.
+pub fn summary_numbers(path: &Path) -> anyhow::Result<ReportNumbers> {
+    let rec = Recording::open(path)?;
+    Ok(report::numbers(&rec))
+}
+
+pub fn replay(args: ReplayArgs) -> anyhow::Result<()> {
+    crate::replay::run(&args).map(|_| ())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Rig {
+        #[command(subcommand)]
+        cmd: Cmd,
+    }
+    #[derive(clap::Subcommand)]
+    enum Cmd {
+        Replay(ReplayArgs),
+        Report(ReportArgs),
+    }
+
+    #[test]
+    fn replay_and_report_flags_parse() {
+        let Cmd::Replay(a) = Rig::parse_from(["rig", "replay", "run.mcap", "--controller"]).cmd else { panic!() };
+        assert_eq!(a.controller, Some(PathBuf::from("auto")), "--controller alone = the default controller");
+        assert_eq!(a.speed, None);
+        let Cmd::Replay(a) = Rig::parse_from(["rig", "replay", "run.mcap", "--speed", "4", "--controller", "./mine"]).cmd else {
+            panic!()
+        };
+        assert_eq!((a.speed, a.controller), (Some(4.0), Some(PathBuf::from("./mine"))));
+        let Cmd::Report(r) = Rig::parse_from(["rig", "report", "a/run.mcap", "--instants", "0.5,1.25"]).cmd else { panic!() };
+        assert_eq!(r.instants, vec![0.5, 1.25]);
+        assert_eq!(default_report_dir(&r.file), PathBuf::from("a/run-report"));
+    }
+}

@@ -161,3 +161,24 @@ fn an_unwritable_target_is_a_clear_start_error() {
     let msg = err.to_string();
     assert!(msg.contains("/dev/full") && msg.to_lowercase().contains("no space"), "{msg}");
 }
+
+#[test]
+fn commands_refuse_a_cut_file_unless_allowed_and_name_the_way_out() {
+    let run = SyntheticRun { ticks: 1500, ..Default::default() };
+    let path = tmp("cli-cut-source.mcap");
+    run.record(small_chunks(&path, &run)).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = tmp("cli-cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let err = format!("{:#}", recordings::cli::open_for(&cut, false).unwrap_err());
+    assert!(err.contains("truncated") && err.contains("--allow-truncated") && err.contains("cli-cut.mcap"), "{err}");
+    let rec = recordings::cli::open_for(&cut, true).unwrap();
+    assert!(!rec.joint_state.is_empty());
+    // `rig run` still gets numbers from a killed run, flagged as truncated.
+    let n = recordings::cli::summary_numbers(&cut).unwrap();
+    assert!(n.truncated.is_some() && n.ticks == rec.joint_state.len());
+    let junk = tmp("cli-junk.mcap");
+    std::fs::write(&junk, b"PK\x03\x04 a zip file").unwrap();
+    let err = format!("{:#}", recordings::cli::summary_numbers(&junk).unwrap_err());
+    assert!(err.contains("not an MCAP recording"), "{err}");
+}
