@@ -3,7 +3,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::params::{self, DhRow, LinkRow};
-use crate::spatial::BodyInertia;
+use crate::spatial::{BodyInertia, OriginInertia};
 use crate::tool::Tool;
 use crate::Vec6;
 
@@ -74,6 +74,8 @@ pub struct Robot {
     pub viscous: Vec6,
     /// Bodies as the dynamics sees them: link 6 includes the tool.
     pub(crate) bodies: [BodyInertia; 6],
+    /// The same bodies about their frame origins, for the CRBA.
+    pub(crate) origin_inertias: [OriginInertia; 6],
     /// TCP in the flange frame (zero without a tool).
     pub(crate) tcp_flange_m: Vector3<f64>,
 }
@@ -109,6 +111,7 @@ impl Robot {
             armature: Vec6::zeros(),
             viscous: Vec6::zeros(),
             bodies: [BodyInertia::default(); 6],
+            origin_inertias: [OriginInertia::default(); 6],
             tcp_flange_m: Vector3::zeros(),
         };
         robot.rebuild();
@@ -128,6 +131,7 @@ impl Robot {
                 }
             }
             self.bodies[i] = BodyInertia::local(&body);
+            self.origin_inertias[i] = OriginInertia::from_body(&self.bodies[i]);
         }
         self.tcp_flange_m = self.tool.map_or(Vector3::zeros(), |t| t.tcp_offset_flange_m);
     }

@@ -1,10 +1,10 @@
-//! Recursive Newton-Euler in the links' own DH frames (Luh-Walker-Paul form, e.g. Siciliano et
+//! Recursive Newton-Euler and the composite rigid body algorithm in the links' own DH frames (Luh-Walker-Paul form, e.g. Siciliano et
 //! al. (7.107)-(7.111)): no per-call inertia rotations, only the structured rotations
 //! `Rz(q) Rx(alpha)` between neighbouring frames. The fastest way to evaluate (7.1) and (7.2).
 
 use crate::model::{DhConst, Robot};
-use crate::spatial::{BodyInertia, V3};
-use crate::Vec6;
+use crate::spatial::{BodyInertia, OriginInertia, V3};
+use crate::{Mat6, Vec6};
 
 /// `(sin q_i, cos q_i)` of all joints, computed once per call and shared.
 pub(crate) type SinCos = [(f64, f64); 6];
@@ -87,4 +87,48 @@ impl Robot {
         }
         tau
     }
+
+    /// Composite rigid body algorithm in link frames: composite inertias of links `i..6` about
+    /// origin `i`, then each column's momentum carried down the chain like the RNEA's forces.
+    /// Armature included.
+    #[inline(always)]
+    pub(crate) fn crba_local(&self, sc: &SinCos) -> Mat6 {
+        let mut composite = [OriginInertia::default(); 6];
+        composite[5] = self.origin_inertias[5];
+        for i in (0..5).rev() {
+            let dh = &self.dh[i + 1];
+            let (s, c) = sc[i + 1];
+            let child = &composite[i + 1];
+            let i_rot = child.i.rotated_x(dh.cos_alpha, dh.sin_alpha).rotated_z(c, s);
+            let h_rot = to_parent(dh, sc[i + 1], &child.h);
+            let offset = V3::new(dh.a * c, dh.a * s, dh.d);
+            composite[i] = self.origin_inertias[i].add(&child.to_parent(i_rot, h_rot, &offset));
+        }
+        let mut m = Mat6::zeros();
+        for j in 0..6 {
+            let dh = &self.dh[j];
+            // Unit rate of joint j: w = z (joint axis in frame j), origin j moves at z x p*.
+            let (z, p) = axis_and_offset(dh);
+            let (mut n, mut f) = composite[j].apply(&z, &z.cross(&p));
+            m[(j, j)] = z.dot(&(n + p.cross(&f))) + self.armature[j];
+            for i in (0..j).rev() {
+                let dh_child = &self.dh[i + 1];
+                let sc_child = sc[i + 1];
+                f = to_parent(dh_child, sc_child, &f);
+                let offset = V3::new(dh_child.a * sc_child.1, dh_child.a * sc_child.0, dh_child.d);
+                n = to_parent(dh_child, sc_child, &n) + offset.cross(&f);
+                let (z_i, p_i) = axis_and_offset(&self.dh[i]);
+                let mij = z_i.dot(&(n + p_i.cross(&f)));
+                m[(i, j)] = mij;
+                m[(j, i)] = mij;
+            }
+        }
+        m
+    }
+}
+
+/// Joint `i`'s axis and the offset `p*` of origin `i` from origin `i-1`, both in frame `i`.
+#[inline(always)]
+fn axis_and_offset(dh: &DhConst) -> (V3, V3) {
+    (V3::new(0.0, dh.sin_alpha, dh.cos_alpha), V3::new(dh.a, dh.d * dh.sin_alpha, dh.d * dh.cos_alpha))
 }

@@ -225,3 +225,16 @@ fn unforced_motion_conserves_energy() {
         assert!(max_drift < 1e-9 * max_kinetic, "energy drift {max_drift:e} J of {max_kinetic} J kinetic");
     }
 }
+
+#[test]
+fn cholesky_solve_solves_and_rejects_indefinite_matrices() {
+    let mut rng = Rng::new(19);
+    let a = Mat6::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+    let spd = a * a.transpose() + Mat6::identity() * 1e-3;
+    let x = rng.vec6(1.0);
+    let solved = robot::dynamics::cholesky_solve(spd, spd * x);
+    assert!((solved - x).norm() < 1e-9 * x.norm(), "{solved:?} vs {x:?}");
+    let mut indefinite = spd;
+    indefinite[(3, 3)] = -1.0;
+    assert!(robot::dynamics::cholesky_solve(indefinite, x).iter().all(|v| v.is_nan()));
+}
