@@ -3,6 +3,7 @@
 //! tick over iceoryx2, applies the controller's torque through the [`gate::Gate`] (misses, safe
 //! stop, takeover blending, refusals) and records every tick.
 
+pub mod contact;
 pub mod gate;
 pub mod histogram;
 pub mod loop_rt;
