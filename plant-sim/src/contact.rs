@@ -20,7 +20,7 @@
 //! of the Gaussian is exact to ~1e-4 relative and still sums to 1) and each substep costs O(modes).
 //! Nothing allocates after construction.
 
-use nalgebra::{Isometry3, Matrix3, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use recordings::{StripRecord, MAX_CENTRELINE};
 use robot::Vec6;
 use scenario::Scenario;
@@ -295,23 +295,23 @@ impl StripContact {
     }
 
     /// Wheel's lowest point (base) and the direction to it from the wheel centre, for a TCP (the
-    /// wheel centre) pose; the wheel axis is the tool y axis.
+    /// wheel centre) at `tcp_pos` with tool orientation `rot`; the wheel axis is the tool y axis.
     #[inline]
-    fn lowest_point(&self, tcp: &Isometry3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        let axis = tcp.rotation * Vector3::y();
+    fn lowest_point(&self, tcp_pos: &Vector3<f64>, rot: &Matrix3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        let axis = rot.column(1).into_owned();
         let down = -Vector3::z();
         let in_plane = down - axis * axis.dot(&down);
         let n = in_plane.norm();
         let d = if n > 1e-9 { in_plane / n } else { down };
-        (tcp.translation.vector + d * self.geo.wheel_radius_m, d)
+        (tcp_pos + d * self.geo.wheel_radius_m, d)
     }
 
     /// One substep: contact force from the wheel state at the substep start (TCP = wheel centre
-    /// pose and twist (v, ω) in base axes), strip advanced by h. Returns the wrench on the tool to
-    /// hold over the substep.
-    pub fn substep(&mut self, tcp: &Isometry3<f64>, twist_base: &Vec6) -> ContactWrench {
+    /// position, tool orientation and TCP twist (v, ω), base frame), strip advanced by h. Returns
+    /// the wrench on the tool to hold over the substep.
+    pub fn substep(&mut self, tcp_pos_base: &Vector3<f64>, rot_base_tool: &Matrix3<f64>, twist_base: &Vec6) -> ContactWrench {
         let h = self.h_s;
-        let (p_low, d) = self.lowest_point(tcp);
+        let (p_low, d) = self.lowest_point(tcp_pos_base, rot_base_tool);
         let v = Vector3::new(twist_base[0], twist_base[1], twist_base[2]);
         let w = Vector3::new(twist_base[3], twist_base[4], twist_base[5]);
         let v_low = v + w.cross(&(d * self.geo.wheel_radius_m));
@@ -440,17 +440,18 @@ mod tests {
         ContactGeometry::from_scenario(&Scenario::default())
     }
 
-    /// TCP (wheel centre) pose for the wheel's lowest point at task (z, y).
-    fn tcp_at(g: &ContactGeometry, z: f64, y_low: f64) -> Isometry3<f64> {
-        robot::scenario_tcp_pose(g.strip_start_x_m + z, g.strip_y_m, g.table_z_m + y_low + g.wheel_radius_m)
+    /// TCP (wheel centre) position and tool-down orientation for the wheel's lowest point at task (z, y).
+    fn tcp_at(g: &ContactGeometry, z: f64, y_low: f64) -> (Vector3<f64>, Matrix3<f64>) {
+        let pose = robot::scenario_tcp_pose(g.strip_start_x_m + z, g.strip_y_m, g.table_z_m + y_low + g.wheel_radius_m);
+        (pose.translation.vector, pose.rotation.to_rotation_matrix().into_inner())
     }
 
     fn run_hold(model: &StripModel, h: f64, z: f64, y_low: f64, t_end: f64) -> StripContact {
         let g = geo();
         let mut c = StripContact::new(model, g, h);
-        let pose = tcp_at(&g, z, y_low);
+        let (pos, rot) = tcp_at(&g, z, y_low);
         for _ in 0..(t_end / h).round() as usize {
-            c.substep(&pose, &Vec6::zeros());
+            c.substep(&pos, &rot, &Vec6::zeros());
         }
         c
     }
@@ -518,7 +519,8 @@ mod tests {
             for i in 0..n {
                 let t = i as f64 * h;
                 let (y, v) = traj(t);
-                c.substep(&tcp_at(&g, 0.008, y), &Vec6::new(0.0, 0.0, v, 0.0, 0.0, 0.0));
+                let (pos, rot) = tcp_at(&g, 0.008, y);
+                c.substep(&pos, &rot, &Vec6::new(0.0, 0.0, v, 0.0, 0.0, 0.0));
                 if (i + 1) % every == 0 {
                     out.push(c.contact_force_n());
                 }

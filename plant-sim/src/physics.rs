@@ -72,13 +72,23 @@ pub struct Physics {
     time_s: f64,
     /// Task z of the strip start (base x), m, for the recorded wheel position.
     strip_start_x_m: f64,
+    /// Strip + wheel contact (`contact.rs`); None when `strip.enabled = false`.
+    contact: Option<crate::contact::StripContact>,
 }
 
 impl Physics {
     /// Build the plant of a scenario, at rest in the start pose (IK of [`start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
-        let _ = cache_dir;
+        let contact = if s.strip.enabled {
+            let params = crate::contact::strip_params(s);
+            let model = strip::StripModel::load_or_build_in(cache_dir, &params)
+                .with_context(|| format!("strip model (cache {})", cache_dir.display()))?;
+            let h = s.loop_.period_s / s.loop_.substeps as f64;
+            Some(crate::contact::StripContact::new(&model, crate::contact::ContactGeometry::from_scenario(s), h))
+        } else {
+            None
+        };
         let robot = plant_robot(s);
         let target = start_tcp_pose(s);
         let q = robot
@@ -92,6 +102,7 @@ impl Physics {
             dt_sub_s: s.loop_.period_s / s.loop_.substeps as f64,
             time_s: 0.0,
             strip_start_x_m: s.placement.strip_start_x_m,
+            contact,
         })
     }
 
@@ -127,10 +138,24 @@ impl Physics {
     }
 
     /// Advance one tick with the joint torque `tau` (N m) held constant: `substeps` RK4 steps.
-    pub fn step_tick(&mut self, tau: &Vec6) {
+    /// With the strip, each substep first advances the contact (`contact.rs`: strip exact, force
+    /// implicit at the substep end) from the TCP state at the substep start; its wrench on the
+    /// tool W enters the robot as the generalized force J(q)ᵀ W held over the RK4 substep.
+    pub fn step_tick(&mut self, tau_cmd: &Vec6) {
         let h = self.dt_sub_s;
         for _ in 0..self.substeps {
             let (q, qd) = (self.q, self.qd);
+            let tau_ext = match self.contact.as_mut() {
+                Some(c) => {
+                    let frames = self.robot.frames(&q);
+                    let p = self.robot.tcp_position(&frames);
+                    let jac = self.robot.jacobian_point(&frames, &p);
+                    let w = c.substep(&p, &frames.rot[6], &(jac * qd));
+                    jac.transpose() * w.as_vec6()
+                }
+                None => Vec6::zeros(),
+            };
+            let tau = &(tau_cmd + tau_ext);
             let k1v = qd;
             let k1a = self.qdd(&q, &qd, tau);
             let q2 = q + k1v * (0.5 * h);
@@ -151,17 +176,29 @@ impl Physics {
     /// End-effector wrench the strip exerts on the tool, as the sensor reports it
     /// ([`messages::WrenchFrame::SensorAtTcp`]): `(force N, torque N m)`. Zero without contact.
     pub fn wrench(&self) -> ([f64; 3], [f64; 3]) {
-        ([0.0; 3], [0.0; 3])
+        match &self.contact {
+            Some(c) => c.wrench_sensor(&self.robot.frames(&self.q).rot[6]),
+            None => ([0.0; 3], [0.0; 3]),
+        }
     }
 
     /// True while the wheel touches the strip.
     pub fn in_contact(&self) -> bool {
-        false
+        self.contact.as_ref().is_some_and(|c| c.in_contact())
+    }
+
+    /// The strip contact, if the scenario has a strip (centre-line z for the recording metadata).
+    pub fn contact(&self) -> Option<&crate::contact::StripContact> {
+        self.contact.as_ref()
     }
 
     /// Strip outputs of the current state for the recording. Robot-only: the wheel position along
     /// the strip (task z = base x − strip start) and zero forces.
     pub fn fill_strip_record(&self, r: &mut recordings::StripRecord) {
+        if let Some(c) = &self.contact {
+            c.fill_record(r);
+            return;
+        }
         let tcp = self.robot.tcp_pose(&self.q);
         r.wheel_z_m = tcp.translation.vector.x - self.strip_start_x_m;
         r.contact_force_n = 0.0;
