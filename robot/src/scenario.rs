@@ -20,9 +20,7 @@ pub fn scenario_tcp_pose(x_m: f64, y_m: f64, z_m: f64) -> Isometry3<f64> {
 }
 
 /// Seed for [`crate::Robot::ik_tcp`] near the scenario pose: elbow up, wrist not flipped,
-/// joints 1, 4, 6 at zero. With the default tool the wheel's contact point at
-/// (0.90, 0, 0.708) m solves to q = (0, -1.353, 0.524, 0, 0.829, 0), i.e. ABB axis angles
-/// (0, 0.217, 0.524, 0, 0.829, 0) rad.
+/// joints 1, 4, 6 at zero.
 pub const SCENARIO_IK_SEED: [f64; 6] = [0.0, -1.3, 0.5, 0.0, 0.8, 0.0];
 
 /// `SCENARIO_IK_SEED` as a vector.

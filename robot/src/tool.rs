@@ -10,9 +10,10 @@ use nalgebra::{Matrix3, Vector3};
 /// Rigid tool (bracket + applicator wheel) attached to the flange.
 ///
 /// Defaults (documented in the README): 1 kg, modelled as a solid cylinder of radius 30 mm and
-/// length 100 mm along the flange z axis, COM at 50 mm; wheel radius 10 mm, wheel centre at
-/// 90 mm, and the TCP at the wheel's lowest point when the tool points down, i.e. 100 mm along
-/// flange z. The TCP is thus the nominal contact point with the strip.
+/// length 100 mm along the flange z axis, COM at 50 mm; the TCP is the wheel centre, 100 mm
+/// along flange z (the scenario's `robot.tool_offset_m`); wheel radius 10 mm, so with the tool
+/// pointing down the wheel's lowest point (the nominal contact with the strip) is 10 mm below
+/// the TCP.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tool {
     pub mass_kg: f64,
@@ -20,15 +21,16 @@ pub struct Tool {
     pub com_flange_m: Vector3<f64>,
     /// Inertia about the COM, flange axes (kg m^2).
     pub inertia_com: Matrix3<f64>,
-    /// Tool centre point in the flange frame (m): the wheel's contact point.
+    /// Tool centre point in the flange frame (m): the wheel centre.
     pub tcp_offset_flange_m: Vector3<f64>,
     pub wheel_radius_m: f64,
 }
 
 impl Tool {
-    /// Wheel centre in the flange frame: one wheel radius back from the TCP along flange z.
-    pub fn wheel_centre_flange_m(&self) -> Vector3<f64> {
-        self.tcp_offset_flange_m - Vector3::new(0.0, 0.0, self.wheel_radius_m)
+    /// The wheel's point furthest along flange z, in the flange frame: its lowest point, where
+    /// it touches the strip, when the tool points straight down.
+    pub fn contact_point_flange_m(&self) -> Vector3<f64> {
+        self.tcp_offset_flange_m + Vector3::new(0.0, 0.0, self.wheel_radius_m)
     }
 }
 

@@ -3,10 +3,22 @@
 use nalgebra::Vector3;
 use robot::{scenario_ik_seed, scenario_tcp_pose, IkError, Robot, Tool, Vec6};
 
-/// Strip top (table at 0.70 m plus the 8 mm strip) along base x from 0.88 m; the wheel rolls
-/// over task z = 2 .. 38 mm.
+/// Wheel centre (the TCP) one wheel radius above the strip top (table at 0.70 m plus the 8 mm
+/// strip), along base x from 0.88 m as the wheel rolls over task z = 2 .. 38 mm.
 fn scenario_targets() -> impl Iterator<Item = (f64, f64, f64)> {
-    (0..=9).map(|k| (0.88 + 0.002 + 0.004 * k as f64, 0.0, 0.708))
+    let radius = Tool::default().wheel_radius_m;
+    (0..=9).map(move |k| (0.88 + 0.002 + 0.004 * k as f64, 0.0, 0.708 + radius))
+}
+
+#[test]
+fn contact_point_touches_the_strip_when_tcp_is_one_radius_above() {
+    let tool = Tool::default();
+    let robot = Robot::irb2400_with_tool(tool);
+    let (x, y, z) = scenario_targets().next().unwrap();
+    let q = robot.ik_tcp(&scenario_tcp_pose(x, y, z), &scenario_ik_seed()).unwrap();
+    let flange = robot.flange_pose(&q);
+    let contact = flange * nalgebra::Point3::from(tool.contact_point_flange_m());
+    assert!((contact.coords - Vector3::new(x, y, 0.708)).norm() < 1e-9, "{contact}");
 }
 
 #[test]
