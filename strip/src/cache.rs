@@ -1,6 +1,7 @@
 //! On-disk cache of built models, keyed by a hash of every parameter plus the code version.
 //! Layout: b"STRIPMDL", u64 LE header length, JSON header, then raw little-endian f64 arrays
-//! (A, B, C, D column-major; modal lambda, weights, B, C as re/im pairs).
+//! (A, B, C, D column-major; modal lambda, weights, B, C as re/im pairs; then top xyz, bottom xz,
+//! bottom areas, bulge offsets, Hankel singular values).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -16,19 +17,16 @@ const MAGIC: &[u8; 8] = b"STRIPMDL";
 
 #[derive(Serialize, Deserialize)]
 struct Header {
-    params: StripParams,
+    /// Exact text of the parameters (compared as text: JSON float parsing need not round-trip).
+    params_json: String,
     info: BuildInfo,
     order: usize,
     n_in: usize,
     n_out: usize,
+    n_bottom: usize,
     modes: usize,
-    top_xyz_m: Vec<[f64; 3]>,
-    bottom_xz_m: Vec<[f64; 2]>,
-    bottom_area_m2: Vec<f64>,
+    n_hsv: usize,
     centre_bottom: Vec<usize>,
-    bulge_top_uy_m: Vec<f64>,
-    bulge_bottom_reaction_n: Vec<f64>,
-    hsv: Vec<f64>,
 }
 
 /// Cache directory: `$RIG_CACHE_DIR`, else `<workspace>/target/strip-cache` when run from the
@@ -71,19 +69,15 @@ fn push_c(buf: &mut Vec<u8>, v: &[c64]) {
 pub fn save(model: &StripModel, path: &Path) -> Result<()> {
     let io = |e| StripError::Io { path: path.display().to_string(), source: e };
     let h = Header {
-        params: model.params.clone(),
+        params_json: serde_json::to_string(&model.params).expect("params serialise"),
         info: model.info.clone(),
         order: model.order(),
         n_in: model.n_top(),
         n_out: model.c.nrows(),
+        n_bottom: model.n_bottom(),
         modes: model.modal.modes(),
-        top_xyz_m: model.top_xyz_m.clone(),
-        bottom_xz_m: model.bottom_xz_m.clone(),
-        bottom_area_m2: model.bottom_area_m2.clone(),
+        n_hsv: model.hsv.len(),
         centre_bottom: model.centre_bottom.clone(),
-        bulge_top_uy_m: model.bulge_top_uy_m.clone(),
-        bulge_bottom_reaction_n: model.bulge_bottom_reaction_n.clone(),
-        hsv: model.hsv.clone(),
     };
     let json = serde_json::to_vec(&h).expect("header serialises");
     let mut buf = Vec::with_capacity(16 + json.len() + 8 * (model.d.nrows() * model.d.ncols() * 3));
@@ -99,6 +93,19 @@ pub fn save(model: &StripModel, path: &Path) -> Result<()> {
     }
     push_c(&mut buf, &model.modal.b);
     push_c(&mut buf, &model.modal.c);
+    let vecs: [&[f64]; 6] = [
+        model.top_xyz_m.as_flattened(),
+        model.bottom_xz_m.as_flattened(),
+        &model.bottom_area_m2,
+        &model.bulge_top_uy_m,
+        &model.bulge_bottom_reaction_n,
+        &model.hsv,
+    ];
+    for v in vecs {
+        for x in v {
+            buf.extend_from_slice(&x.to_le_bytes());
+        }
+    }
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(io)?;
     }
@@ -133,6 +140,9 @@ impl Reader<'_> {
             f64::from_le_bytes(s[k..k + 8].try_into().unwrap())
         }))
     }
+    fn vec(&mut self, n: usize) -> Result<Vec<f64>> {
+        Ok(self.f64s(n)?.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect())
+    }
     fn cvec(&mut self, n: usize) -> Result<Vec<c64>> {
         let s = self.f64s(2 * n)?;
         Ok(s.chunks_exact(16)
@@ -155,7 +165,8 @@ pub fn load(path: &Path, expect: &StripParams) -> Result<Option<StripModel>> {
     let hl = u64::from_le_bytes(bytes[8..16].try_into().unwrap()) as usize;
     let h: Header = serde_json::from_slice(bytes.get(16..16 + hl).ok_or_else(|| bad("truncated header"))?)
         .map_err(|e| bad(&format!("header: {e}")))?;
-    if &h.params != expect || h.info.code_version != crate::CODE_VERSION {
+    let expect_json = serde_json::to_string(expect).expect("params serialise");
+    if h.params_json != expect_json || h.info.code_version != crate::CODE_VERSION {
         return Err(bad("parameters or code version differ from the request (hash collision or stale file)"));
     }
     let mut r = Reader { b: &bytes, pos: 16 + hl, path };
@@ -164,22 +175,31 @@ pub fn load(path: &Path, expect: &StripParams) -> Result<Option<StripModel>> {
     let c = r.mat(h.n_out, h.order)?;
     let d = r.mat(h.n_out, h.n_in)?;
     let lam = r.cvec(h.modes)?;
-    let weight = r.f64s(h.modes)?.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect();
+    let weight = r.vec(h.modes)?;
     let mb = r.cvec(h.modes * h.n_in)?;
     let mc = r.cvec(h.modes * h.n_out)?;
+    let top = r.vec(3 * h.n_in)?;
+    let bxz = r.vec(2 * h.n_bottom)?;
+    let bottom_area_m2 = r.vec(h.n_bottom)?;
+    let bulge_top_uy_m = r.vec(h.n_in)?;
+    let bulge_bottom_reaction_n = r.vec(h.n_bottom)?;
+    let hsv = r.vec(h.n_hsv)?;
+    if r.pos != bytes.len() {
+        return Err(bad("trailing bytes"));
+    }
     Ok(Some(StripModel {
-        params: h.params,
+        params: expect.clone(),
         a,
         b,
         c,
         d,
-        top_xyz_m: h.top_xyz_m,
-        bottom_xz_m: h.bottom_xz_m,
-        bottom_area_m2: h.bottom_area_m2,
+        top_xyz_m: top.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        bottom_xz_m: bxz.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+        bottom_area_m2,
         centre_bottom: h.centre_bottom,
-        bulge_top_uy_m: h.bulge_top_uy_m,
-        bulge_bottom_reaction_n: h.bulge_bottom_reaction_n,
-        hsv: h.hsv,
+        bulge_top_uy_m,
+        bulge_bottom_reaction_n,
+        hsv,
         modal: ModalForm { lam, weight, b: mb, c: mc },
         info: h.info,
     }))

@@ -12,6 +12,8 @@ use crate::sparse::{Cholesky, Csc};
 use crate::system::FullSystem;
 
 pub struct CraigBampton {
+    /// Sub-stage wall times (s).
+    pub timings: Vec<(String, f64)>,
     /// Free indices of the boundary and interior DOFs.
     pub boundary: Vec<usize>,
     pub interior: Vec<usize>,
@@ -100,16 +102,27 @@ impl CraigBampton {
         let k_bb = sys.k_ff.submatrix(&bmap, nb, &boundary).to_dense();
         let m_bb = sys.m_ff.submatrix(&bmap, nb, &boundary).to_dense();
         let _span = tracing::debug_span!("cb", nb, ni).entered();
+        let mut t = std::time::Instant::now();
+        let mut timings = Vec::new();
+        let mut lap = |name: &str, timings: &mut Vec<(String, f64)>| {
+            let now = std::time::Instant::now();
+            timings.push((format!("cb_{name}"), (now - t).as_secs_f64()));
+            t = now;
+        };
+        lap("partition", &mut timings);
 
         let chol = Cholesky::new(&k_ii, "Craig-Bampton K_ii factorisation")?;
+        lap("factorisation", &mut timings);
         let mut psi = k_ib.to_dense();
         chol.solve_in_place(psi.as_mut());
         for j in 0..psi.ncols() { psi.col_mut(j).iter_mut().for_each(|v| *v = -*v); }
+        lap("constraint_modes", &mut timings);
         crate::progress::stage("fixed-interface modes");
         let lmax = (2.0 * std::f64::consts::PI * p.cb_cutoff_hz).powi(2);
         let modes = lowest_modes(&chol, &m_ii, Want::Below(lmax))?;
         let phi = modes.vectors;
         let nm = phi.ncols();
+        lap("fixed_interface_modes", &mut timings);
         crate::progress::stage("Craig-Bampton matrices");
 
         let n = nb + nm;
@@ -133,6 +146,7 @@ impl CraigBampton {
         sym(&mut k);
         sym(&mut m);
 
+        lap("reduced_matrices", &mut timings);
         // reactions: K_rf T = [K_rb + K_ri Psi, K_ri Phi]
         let nr = sys.k_rf.nrows;
         let mut rmap = vec![usize::MAX; nr];
@@ -150,7 +164,9 @@ impl CraigBampton {
         let k_ic = k_fr.submatrix(&imap, ni, &(0..nr).collect::<Vec<_>>());
         let k_bc = k_fr.submatrix(&bmap, nb, &(0..nr).collect::<Vec<_>>());
 
+        lap("reaction_map", &mut timings);
         Ok(CraigBampton {
+            timings,
             boundary,
             interior,
             k,

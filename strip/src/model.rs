@@ -35,6 +35,8 @@ pub struct BuildInfo {
     /// (stage, seconds) in pipeline order.
     pub timings_s: Vec<(String, f64)>,
     pub code_version: String,
+    /// Relative DC mismatch of the matched-DC formulas from rounding (folded into D).
+    pub dc_residual_rel: f64,
 }
 
 /// Diagonal (complex-modal) form of the reduced model: x = sum_k w_k Re(v_k xi_k), one entry per
@@ -116,6 +118,7 @@ impl StripModel {
         crate::progress::stage("Craig-Bampton (factorisation, constraint modes)");
         let cb = CraigBampton::build(&sys, p)?;
         tm.lap("craig_bampton");
+        let cb_sub = cb.timings.clone();
         crate::progress::stage("CB modal form");
         let cb_modal = cb_modal_system(&cb, p)?;
         tm.lap("cb_modal");
@@ -123,12 +126,7 @@ impl StripModel {
         let n_top = sys.top_nodes.len();
         let (mut nt, mut nbm) = (0.0, 0.0);
         {
-            let mut hs = cb_modal.h.clone();
-            for j in 0..hs.ncols() {
-                let f = 1.0 / cb_modal.omega2[j];
-                hs.col_mut(j).iter_mut().for_each(|v| *v *= f);
-            }
-            let g0 = &hs * &cb_modal.g;
+            let g0 = cb_modal.dc_gain();
             for i in 0..g0.nrows() {
                 let s: f64 = g0.row(i).iter().map(|v| v * v).sum();
                 if i < n_top {
@@ -164,8 +162,9 @@ impl StripModel {
             cb_boundary_dofs: cb.nb(),
             cb_modes: cb.nm(),
             cb_states: 2 * (cb.nb() + cb.nm()),
-            timings_s: tm.out,
+            timings_s: tm.out.into_iter().chain(cb_sub).collect(),
             code_version: crate::CODE_VERSION.to_string(),
+            dc_residual_rel: red.dc_residual_rel,
         };
         let model = StripModel {
             params: p.clone(),
@@ -179,7 +178,7 @@ impl StripModel {
             centre_bottom,
             bulge_top_uy_m,
             bulge_bottom_reaction_n,
-            hsv: red.hsv,
+            hsv: red.hsv.clone(),
             modal,
             info,
         };

@@ -65,6 +65,8 @@ pub struct Report {
     pub statics: StaticSet,
     pub hankel_singular_values: Vec<f64>,
     pub d_nonzero: bool,
+    /// Relative DC residual of the matched-DC formulas from rounding (folded into D).
+    pub dc_residual_rel: f64,
     pub max_real_pole_per_s: f64,
     pub timings_s: BTreeMap<String, f64>,
 }
@@ -170,6 +172,7 @@ pub fn compare(model: &StripModel, art: &Artifacts) -> Result<Report> {
         statics: StaticSet { full, cb: cbr, reduced: red },
         hankel_singular_values: model.hsv.clone(),
         d_nonzero: model.d.norm_max() > 0.0,
+        dc_residual_rel: model.info.dc_residual_rel,
         max_real_pole_per_s: max_real,
         timings_s: timings,
     })
@@ -187,8 +190,8 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "free DOF {}  |  CB: {} boundary + {} modes = {} states  |  reduced order {}  |  D nonzero: {}  |  slowest pole Re {:.3e} 1/s",
-            self.dof_free, self.cb_boundary_dofs, self.cb_modes, self.cb_states, self.order, self.d_nonzero, self.max_real_pole_per_s
+            "free DOF {}  |  CB: {} boundary + {} modes = {} states  |  reduced order {}  |  D nonzero: {}  |  slowest pole Re {:.3e} 1/s  |  matched-DC rounding residue {:.1e}",
+            self.dof_free, self.cb_boundary_dofs, self.cb_modes, self.cb_states, self.order, self.d_nonzero, self.max_real_pole_per_s, self.dc_residual_rel
         );
         let _ = writeln!(s, "\neigenfrequencies (Table D.1 comparison)");
         let _ = writeln!(s, "{:>4} {:>12} {:>10} {:>10}", "mode", "full [Hz]", "full/CB", "full/red");

@@ -27,6 +27,8 @@ pub struct StripStepper {
     wheel_b: Vec<c64>,
     wheel_c: Vec<c64>,
     wheel_d: f64,
+    wheel_cz: Vec<c64>,
+    wheel_step_d: f64,
     wheel_d_bottom: Vec<f64>,
 }
 
@@ -60,6 +62,8 @@ impl StripStepper {
             wheel_b: vec![c64::new(0.0, 0.0); modes],
             wheel_c: vec![c64::new(0.0, 0.0); modes],
             wheel_d: 0.0,
+            wheel_cz: vec![c64::new(0.0, 0.0); modes],
+            wheel_step_d: 0.0,
             wheel_d_bottom: vec![0.0; p - m],
         }
     }
@@ -159,6 +163,27 @@ impl StripStepper {
             }
         }
         self.wheel_d = dww;
+        let mut cb = 0.0;
+        for k in 0..self.modes {
+            self.wheel_cz[k] = self.wheel_c[k] * self.z[k];
+            let (c, b) = (self.wheel_c[k], self.wheel_b[k]);
+            cb += c.re * b.re - c.im * b.im;
+        }
+        self.wheel_step_d = dww + cb;
+    }
+
+    /// Wheel-point displacement (m, +y) at the END of the coming step if no force acted:
+    /// w^T C_top A_d x. Together with [`Self::wheel_step_compliance`]:
+    /// u_y(end of step) = wheel_uy_predict() + wheel_step_compliance() * f_y for a force f_y held
+    /// over the step (and still acting at its end). This implicit (end-of-step) form is the
+    /// well-posed way to close a stiff penalty contact: see README, "algebraic loop".
+    pub fn wheel_uy_predict(&self) -> f64 {
+        self.wheel_cz.iter().zip(&self.xi).map(|(c, x)| c.re * x.re - c.im * x.im).sum()
+    }
+
+    /// End-of-step compliance w^T (C_top B_d + D_top) w (m/N) for this `dt`.
+    pub fn wheel_step_compliance(&self) -> f64 {
+        self.wheel_step_d
     }
 
     /// Wheel-point displacement w^T (C_top x) (m, +y) from the state alone.
@@ -166,9 +191,11 @@ impl StripStepper {
         self.wheel_c.iter().zip(&self.xi).map(|(c, x)| c.re * x.re - c.im * x.im).sum()
     }
 
-    /// Feed-through compliance w^T D_top w (m/N, > 0): the wheel-point displacement is
-    /// `wheel_uy_free() + wheel_compliance() * f_y`. With a penalty law this scalar algebraic
-    /// loop solves in closed form.
+    /// Feed-through compliance w^T D_top w (m/N): the wheel-point displacement now is
+    /// `wheel_uy_free() + wheel_compliance() * f_y`. Matched DC puts the static part of the
+    /// truncated states here; it is small and NOT guaranteed positive (balanced coordinates), so
+    /// a stiff penalty closed on it alone can be ill-posed: prefer the end-of-step pair
+    /// `wheel_uy_predict` / `wheel_step_compliance`.
     pub fn wheel_compliance(&self) -> f64 {
         self.wheel_d
     }

@@ -1,0 +1,190 @@
+//! Pipeline acceptance tests: statics full = CB = reduced, equilibrium, stability, Table D.1
+//! frequency agreement, ZOH stepping against a dense matrix exponential, cache round trip.
+
+use faer::Mat;
+use strip::report::{compare, Report};
+use strip::{StripModel, StripParams, StripStepper, Substrate};
+
+fn params_2mm() -> StripParams {
+    StripParams { element_m: 2e-3, ..Default::default() }
+}
+
+fn report_for(p: &StripParams) -> (Report, StripModel) {
+    let (model, art) = StripModel::build_detailed(p).expect("build");
+    (compare(&model, &art).expect("report"), model)
+}
+
+fn rel(a: &[f64], b: &[f64]) -> f64 {
+    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
+    let den: f64 = b.iter().map(|y| y * y).sum::<f64>().sqrt();
+    num / den
+}
+
+fn check_statics(r: &Report) {
+    let s = &r.statics;
+    // equilibrium: the substrate carries the whole 10 N wheel force
+    for m in [&s.full, &s.cb, &s.reduced] {
+        assert!((m.total_bottom_reaction_n - 10.0).abs() < 1e-8, "sum of reactions {}", m.total_bottom_reaction_n);
+        assert!(m.top_displacement_m < 0.0, "pressing moves the top down");
+    }
+    // CB statics are exact (boundary-loaded), matched DC keeps the CB static gain
+    let e1 = rel(&s.cb.top_uy_m, &s.full.top_uy_m);
+    let e2 = rel(&s.cb.bottom_reaction_n, &s.full.bottom_reaction_n);
+    let e3 = rel(&s.reduced.top_uy_m, &s.cb.top_uy_m);
+    let e4 = rel(&s.reduced.bottom_reaction_n, &s.cb.bottom_reaction_n);
+    assert!(e1 < 1e-9 && e2 < 1e-9, "CB vs full statics: {e1:e} {e2:e}");
+    assert!(e3 < 1e-8 && e4 < 1e-8, "reduced vs CB statics: {e3:e} {e4:e}");
+}
+
+#[test]
+fn two_millimetre_bonded_pipeline() {
+    let (r, model) = report_for(&params_2mm());
+    check_statics(&r);
+    assert_eq!(model.order(), 250);
+    assert!(r.max_real_pole_per_s < 0.0, "reduced model must be stable");
+    assert!(r.d_nonzero, "matched DC gives a feed-through");
+    // reduced eigenfrequencies equal the CB ones (Table D.1 columns 3 and 4 agree)
+    for (a, b) in r.freq_reduced_hz.iter().zip(&r.freq_cb_hz).take(10) {
+        assert!((a / b - 1.0).abs() < 2e-3, "reduced {a} vs CB {b}");
+    }
+}
+
+#[test]
+fn sliding_substrate_and_incompressible_limit() {
+    let p = StripParams { substrate: Substrate::Sliding, poisson: 0.4999, ..params_2mm() };
+    let (r, _) = report_for(&p);
+    check_statics(&r);
+    assert!(r.max_real_pole_per_s < 0.0);
+    // nu = 0.4999 does not lock: the wheel stiffness stays within a few percent of nu = 0.49
+    let (r49, _) = report_for(&StripParams { poisson: 0.49, ..p.clone() });
+    let ratio = r.statics.full.k_s_n_per_m / r49.statics.full.k_s_n_per_m;
+    assert!(ratio > 1.0 && ratio < 1.15, "k_s(0.4999)/k_s(0.49) = {ratio}");
+}
+
+#[test]
+fn one_millimetre_table_d1_and_bond_pressure() {
+    let (r, _) = report_for(&StripParams::default());
+    check_statics(&r);
+    // Table D.1: CB within 1 % of the full model for the modes up to about 1.4 kHz
+    for (f, c) in r.freq_full_hz.iter().zip(&r.freq_cb_hz) {
+        if *f <= 1.45e3 {
+            assert!((f / c - 1.0).abs() < 0.01, "mode at {f} Hz: full/CB = {}", f / c);
+        }
+    }
+    assert!(r.freq_full_hz.iter().filter(|f| **f <= 1.45e3).count() >= 5);
+    // Section 4.2 / DESIGN 4: 10 N gives a bit above 100 kPa on the centre line
+    let pk = r.statics.full.centreline_peak_pressure_pa;
+    assert!(pk > 100e3 && pk < 130e3, "centre-line peak {pk} Pa");
+}
+
+/// Dense expm by scaling and squaring of a Taylor series (independent of the modal stepper).
+fn expm(a: &Mat<f64>) -> Mat<f64> {
+    let norm = a.norm_l1();
+    let s = (norm.log2().ceil().max(0.0) as i32) + 1;
+    let scaled = a * faer::Scale(0.5f64.powi(s));
+    let n = a.nrows();
+    let mut term = Mat::<f64>::identity(n, n);
+    let mut sum = Mat::<f64>::identity(n, n);
+    for k in 1..20 {
+        term = &term * &scaled * faer::Scale(1.0 / k as f64);
+        sum = &sum + &term;
+    }
+    for _ in 0..s {
+        sum = &sum * &sum;
+    }
+    sum
+}
+
+#[test]
+fn zoh_stepper_matches_matrix_exponential_and_settles_to_dc() {
+    let model = StripModel::build(&params_2mm()).unwrap();
+    let dt = 1e-4;
+    let (n, m) = (model.order(), model.n_top());
+    // augmented exponential [[A, B], [0, 0]] dt gives Ad and Bd exactly
+    let mut aug = Mat::<f64>::zeros(n + m, n + m);
+    aug.as_mut().submatrix_mut(0, 0, n, n).copy_from(&model.a);
+    aug.as_mut().submatrix_mut(0, n, n, m).copy_from(&model.b);
+    let e = expm(&(&aug * faer::Scale(dt)));
+    let ad = e.as_ref().submatrix(0, 0, n, n).to_owned();
+    let bd = e.as_ref().submatrix(0, n, n, m).to_owned();
+    let mut w = vec![0.0; m];
+    model.gaussian_weights(0.02, &mut w);
+    let u: Vec<f64> = w.iter().map(|wi| -10.0 * wi).collect();
+    let um = Mat::from_fn(m, 1, |i, _| u[i]);
+    let mut x = Mat::<f64>::zeros(n, 1);
+    let mut st = StripStepper::new(&model, dt);
+    let mut st_w = StripStepper::new(&model, dt);
+    st_w.set_wheel(&w);
+    let p = model.c.nrows();
+    let (mut top, mut bot) = (vec![0.0; m], vec![0.0; p - m]);
+    for k in 0..400 {
+        x = &ad * &x + &bd * &um;
+        st.step(&u);
+        // end-of-step prediction of the wheel point, checked against the output after the step
+        let predicted = st_w.wheel_uy_predict() + st_w.wheel_step_compliance() * -10.0;
+        st_w.step_wheel(-10.0);
+        let after = st_w.wheel_uy_free() + st_w.wheel_compliance() * -10.0;
+        assert!((predicted - after).abs() <= 1e-12 * after.abs().max(1e-9), "step {k}: {predicted} vs {after}");
+        if k % 50 == 49 {
+            let y = &model.c * &x + &model.d * &um;
+            st.outputs(&u, &mut top, &mut bot);
+            let yv: Vec<f64> = (0..p).map(|i| y[(i, 0)]).collect();
+            let sv: Vec<f64> = top.iter().chain(&bot).copied().collect();
+            assert!(rel(&sv, &yv) < 1e-8, "step {k}: modal ZOH vs expm {:e}", rel(&sv, &yv));
+            // wheel scalar helpers agree with the full output map
+            let wu: f64 = w.iter().zip(&top).map(|(a, b)| a * b).sum();
+            let ws = st_w.wheel_uy_free() + st_w.wheel_compliance() * -10.0;
+            assert!((wu - ws).abs() < 1e-9 * wu.abs(), "wheel point {wu} vs {ws}");
+        }
+    }
+    // the end-of-step compliance is positive (well-posed implicit contact) and below the static one
+    let mut probe = StripStepper::new(&model, 1e-5);
+    probe.set_wheel(&w);
+    assert!(probe.wheel_step_compliance() > 0.0);
+    // long run settles to the static (DC) response
+    let y0 = model.static_response(&u);
+    for _ in 0..20000 {
+        st.step(&u);
+    }
+    st.outputs(&u, &mut top, &mut bot);
+    let sv: Vec<f64> = top.iter().chain(&bot).copied().collect();
+    assert!(rel(&sv, &y0) < 1e-6, "settled vs DC {:e}", rel(&sv, &y0));
+}
+
+#[test]
+fn cache_round_trip_and_key() {
+    let p = params_2mm();
+    let dir = std::env::temp_dir().join(format!("strip-cache-test-{}", std::process::id()));
+    let m1 = StripModel::load_or_build_in(&dir, &p).unwrap();
+    let m2 = StripModel::load_or_build_in(&dir, &p).unwrap();
+    assert_eq!(m1.a, m2.a);
+    assert_eq!(m1.d, m2.d);
+    assert_eq!(m1.modal.b, m2.modal.b);
+    assert_eq!(m1.bulge_bottom_reaction_n, m2.bulge_bottom_reaction_n);
+    let q = StripParams { bulge_amplitude_m: 0.2e-3, ..p.clone() };
+    assert_ne!(p.cache_key(), q.cache_key());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn gaussian_weights_and_bulge() {
+    let model = StripModel::build(&params_2mm()).unwrap();
+    let mut w = vec![0.0; model.n_top()];
+    model.gaussian_weights(0.02, &mut w);
+    assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    let imax = (0..w.len()).max_by(|&a, &b| w[a].total_cmp(&w[b])).unwrap();
+    let [x, _, z] = model.top_xyz_m[imax];
+    assert!(x.abs() < 1e-9 && (z - 0.02).abs() < 1e-9, "peak weight at the node under the wheel");
+    // bulge: the bump lifts the strip; the top moves less than the bottom (Figure 6.4), and the
+    // reactions balance (no external load): they sum to zero
+    let p = &model.params;
+    let centre_top = (0..model.n_top())
+        .filter(|&j| model.top_xyz_m[j][0].abs() < 1e-9)
+        .min_by(|&a, &b| (model.top_xyz_m[a][2] - p.bulge_center_m).abs().total_cmp(&(model.top_xyz_m[b][2] - p.bulge_center_m).abs()))
+        .unwrap();
+    let top = model.bulge_top_uy_m[centre_top];
+    assert!(top > 0.0 && top < p.bulge_amplitude_m, "top lift {top} vs bump {}", p.bulge_amplitude_m);
+    let s: f64 = model.bulge_bottom_reaction_n.iter().sum();
+    let smax = model.bulge_bottom_reaction_n.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(s.abs() < 1e-9 * smax, "bulge reactions sum {s}");
+}
