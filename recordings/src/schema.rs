@@ -6,6 +6,7 @@
 
 use crate::cdr::{CdrError, CdrReader, CdrWriter};
 use crate::{EventKind, EventRecord, TickRecord, TimingRecord, MAX_CENTRELINE};
+
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, CONTRACT_VERSION};
 
 /// Schema encoding of every channel (MCAP well-known schema encoding).
@@ -166,7 +167,56 @@ pub const CHANNELS: [ChannelDef; 7] = [JOINT_STATE, JOINT_TORQUE, WRENCH, STRIP,
 // ---------------------------------------------------------------------------------------------
 // Encoders (writer thread).
 
-pub fn encode_joint_state(buf: &mut Vec<u8>, r: &TickRecord) {
+/// A [`TickRecord`] without its centre-line pressure array: what the queue carries in full (the
+/// pressures follow it as f32, only the valid ones), and what the encoders read.
+#[derive(Debug, Clone, Copy)]
+pub struct TickHead {
+    pub state: JointState,
+    pub wrench: Wrench,
+    pub torque: JointTorque,
+    pub torque_held: bool,
+    pub diag: ControllerDiagnostics,
+    pub has_diag: bool,
+    pub strip: StripHead,
+    pub timing: TimingRecord,
+}
+
+/// The scalar part of a [`crate::StripRecord`].
+#[derive(Debug, Clone, Copy)]
+pub struct StripHead {
+    pub wheel_z_m: f64,
+    pub contact_force_n: f64,
+    pub bottom_force_n: f64,
+    pub max_bottom_pressure_pa: f64,
+    pub top_displacement_m: f64,
+    pub n_centreline: u32,
+}
+
+impl TickHead {
+    #[inline]
+    pub fn of(r: &TickRecord) -> Self {
+        let s = &r.strip;
+        Self {
+            state: r.state,
+            wrench: r.wrench,
+            torque: r.torque,
+            torque_held: r.torque_held,
+            diag: r.diag,
+            has_diag: r.has_diag,
+            strip: StripHead {
+                wheel_z_m: s.wheel_z_m,
+                contact_force_n: s.contact_force_n,
+                bottom_force_n: s.bottom_force_n,
+                max_bottom_pressure_pa: s.max_bottom_pressure_pa,
+                top_displacement_m: s.top_displacement_m,
+                n_centreline: (s.n_centreline as usize).min(MAX_CENTRELINE) as u32,
+            },
+            timing: r.timing,
+        }
+    }
+}
+
+pub fn encode_joint_state(buf: &mut Vec<u8>, r: &TickHead) {
     let s = &r.state;
     let mut w = CdrWriter::new(buf);
     w.u64(s.tick);
@@ -181,7 +231,7 @@ pub fn encode_joint_state(buf: &mut Vec<u8>, r: &TickRecord) {
     w.u64(s.total_misses);
 }
 
-pub fn encode_joint_torque(buf: &mut Vec<u8>, r: &TickRecord) {
+pub fn encode_joint_torque(buf: &mut Vec<u8>, r: &TickHead) {
     let mut w = CdrWriter::new(buf);
     w.u64(r.state.tick);
     w.u64(r.torque.tick);
@@ -191,7 +241,7 @@ pub fn encode_joint_torque(buf: &mut Vec<u8>, r: &TickRecord) {
     w.u64(r.torque.controller_id);
 }
 
-pub fn encode_wrench(buf: &mut Vec<u8>, r: &TickRecord) {
+pub fn encode_wrench(buf: &mut Vec<u8>, r: &TickHead) {
     let mut w = CdrWriter::new(buf);
     w.u64(r.state.tick);
     w.f64_array(&r.wrench.force);
@@ -199,8 +249,9 @@ pub fn encode_wrench(buf: &mut Vec<u8>, r: &TickRecord) {
     w.u32(r.wrench.frame);
 }
 
-/// `centreline_z_m`: the nodes' z from the metadata (empty if unknown).
-pub fn encode_strip(buf: &mut Vec<u8>, r: &TickRecord, centreline_z_m: &[f32]) {
+/// `centreline_pressure_pa`: the valid pressures; `centreline_z_m`: the nodes' z from the
+/// metadata (empty if unknown).
+pub fn encode_strip(buf: &mut Vec<u8>, r: &TickHead, centreline_pressure_pa: &[f32], centreline_z_m: &[f32]) {
     let s = &r.strip;
     let mut w = CdrWriter::new(buf);
     w.u64(r.state.tick);
@@ -209,11 +260,11 @@ pub fn encode_strip(buf: &mut Vec<u8>, r: &TickRecord, centreline_z_m: &[f32]) {
     w.f64(s.bottom_force_n);
     w.f64(s.max_bottom_pressure_pa);
     w.f64(s.top_displacement_m);
-    w.f32_seq(s.centreline().iter().map(|&p| p as f32));
+    w.f32_seq(centreline_pressure_pa.iter().copied());
     w.f32_seq(centreline_z_m.iter().copied());
 }
 
-pub fn encode_controller(buf: &mut Vec<u8>, r: &TickRecord) {
+pub fn encode_controller(buf: &mut Vec<u8>, r: &TickHead) {
     let d = &r.diag;
     let mut w = CdrWriter::new(buf);
     w.u64(r.state.tick);
@@ -227,7 +278,7 @@ pub fn encode_controller(buf: &mut Vec<u8>, r: &TickRecord) {
     w.u64(d.compute_time_ns);
 }
 
-pub fn encode_timing(buf: &mut Vec<u8>, r: &TickRecord, recorder_dropped: u64) {
+pub fn encode_timing(buf: &mut Vec<u8>, r: &TickHead, recorder_dropped: u64) {
     let t = &r.timing;
     let mut w = CdrWriter::new(buf);
     w.u64(r.state.tick);
@@ -482,7 +533,9 @@ mod tests {
 
     #[test]
     fn every_channel_round_trips_field_for_field() {
-        let r = sample();
+        let full = sample();
+        let r = TickHead::of(&full);
+        let p: Vec<f32> = full.strip.centreline().iter().map(|&p| p as f32).collect();
         let mut buf = Vec::new();
         encode_joint_state(&mut buf, &r);
         assert_eq!(decode_joint_state(&buf).unwrap(), r.state);
@@ -498,7 +551,7 @@ mod tests {
         let sec = i32::from_le_bytes(buf[12..16].try_into().unwrap()) as u64;
         let nsec = u32::from_le_bytes(buf[16..20].try_into().unwrap()) as u64;
         assert_eq!(sec * 1_000_000_000 + nsec, r.timing.publish_wall_ns);
-        encode_strip(&mut buf, &r, &[0.001, 0.002, 0.003]);
+        encode_strip(&mut buf, &r, &p, &[0.001, 0.002, 0.003]);
         let s = decode_strip(&buf).unwrap();
         assert_eq!(s.tick, 41);
         assert_eq!(s.wheel_z_m, 0.012);
