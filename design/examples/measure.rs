@@ -1,0 +1,12 @@
+//! Acceptance numbers from a recording: `measure RUN.mcap SCENARIO.toml`.
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let rec = recordings::read::Recording::open(&args[1])?;
+    let s = scenario::Scenario::load(std::path::Path::new(&args[2]))?;
+    let t = design::metrics::tracking_from_recording(&rec, &s)?;
+    println!("tracking over the roll: max {:.4} N, rms {:.4} N ({} ticks)", t.max_n, t.rms_n, t.samples);
+    let p = design::metrics::peak_centreline_pressure(&rec, 4e-3, 36e-3);
+    let worst = p.iter().cloned().fold((0.0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+    println!("bond: {} nodes in [4, 36] mm, lowest peak pressure {:.1} kPa at z = {:.1} mm", p.len(), worst.1 / 1e3, worst.0 * 1e3);
+    Ok(())
+}

@@ -1,0 +1,115 @@
+//! In-process 6-DOF servo simulation: the plant's physics (`plant_sim::physics`, robot + strip
+//! contact) and the controller's step (`controller::daemon::step`) in lockstep without IPC.
+//! Same computations as the two daemons in lockstep mode, minus the torque gate (no misses can
+//! occur in-process), so tracking studies (robustness table, substep convergence) run in seconds.
+
+use std::path::Path;
+
+use controller::gains::Gains;
+use controller::law::ControlLaw;
+use controller::model::{controller_robot, tool_down_rotation, TaskFrame};
+use controller::reference::{Phase, ReferenceGenerator, ReferenceParams};
+use messages::{JointState, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
+use plant_sim::physics::Physics;
+use recordings::{StripRecord, MAX_CENTRELINE};
+use robot::Vec6;
+use scenario::Scenario;
+
+/// One recorded sample of the servo run (per tick).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServoSample {
+    pub t_s: f64,
+    pub phase: Phase,
+    pub force_ref_n: f64,
+    pub contact_force_n: f64,
+    pub bottom_force_n: f64,
+    pub wheel_z_m: f64,
+}
+
+/// Tracking figures over the rolling phase (issue 6 acceptance metric):
+/// e = | |bottom force| − |force reference| |.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Tracking {
+    pub max_n: f64,
+    pub rms_n: f64,
+    pub samples: usize,
+}
+
+/// Tracking figures of the `Roll` phase of `samples`.
+pub fn tracking(samples: &[ServoSample]) -> Tracking {
+    let e: Vec<f64> = samples
+        .iter()
+        .filter(|s| s.phase == Phase::Roll)
+        .map(|s| (s.bottom_force_n.abs() - s.force_ref_n.abs()).abs())
+        .collect();
+    if e.is_empty() {
+        return Tracking::default();
+    }
+    Tracking {
+        max_n: e.iter().cloned().fold(0.0, f64::max),
+        rms_n: (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt(),
+        samples: e.len(),
+    }
+}
+
+/// Run the scenario's servo run in-process for `duration_s` (0 = until the reference is done
+/// plus 0.1 s). `cache_dir`: the strip model cache.
+pub fn run_servo(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow::Result<Vec<ServoSample>> {
+    let mut physics = Physics::new(s, cache_dir)?;
+    let task = TaskFrame::from_scenario(s);
+    let mut law = ControlLaw::new(controller_robot(s), task, Gains::from_scenario(s, f64::NAN), tool_down_rotation());
+    let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
+    let period = s.loop_.period_s;
+    let mut out = Vec::new();
+    let mut rec = StripRecord {
+        wheel_z_m: 0.0,
+        contact_force_n: 0.0,
+        bottom_force_n: 0.0,
+        max_bottom_pressure_pa: 0.0,
+        top_displacement_m: 0.0,
+        n_centreline: 0,
+        centreline_pressure_pa: [0.0; MAX_CENTRELINE],
+    };
+    let max_ticks = if duration_s > 0.0 { (duration_s / period).round() as u64 } else { (60.0 / period) as u64 };
+    let mut done_at: Option<u64> = None;
+    for tick in 0..max_ticks {
+        let (q, qd) = (physics.q(), physics.qd());
+        let state = JointState {
+            contract_version: CONTRACT_VERSION,
+            plant_status: PlantStatus::Running as u32,
+            tick,
+            sim_time_s: tick as f64 * period,
+            q: q.into(),
+            qd: qd.into(),
+            tau_applied: [0.0; 6],
+            period_s: period,
+            flags: 0,
+            consecutive_misses: 0,
+            total_misses: 0,
+        };
+        let (force, torque) = physics.wrench();
+        let wrench = Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick, force, torque };
+        let (tau, diag) = controller::daemon::step(&mut law, &mut reference, &state, &wrench, &q, &qd, CONTRACT_VERSION);
+        physics.fill_strip_record(&mut rec);
+        out.push(ServoSample {
+            t_s: state.sim_time_s,
+            phase: reference.phase(),
+            force_ref_n: diag.force_ref_n,
+            contact_force_n: rec.contact_force_n,
+            bottom_force_n: rec.bottom_force_n,
+            wheel_z_m: rec.wheel_z_m,
+        });
+        if !tau.iter().all(|x| x.is_finite()) {
+            anyhow::bail!("non-finite torque at tick {tick}");
+        }
+        physics.step_tick(&tau);
+        if duration_s <= 0.0 && reference.phase() == Phase::Done {
+            let d = *done_at.get_or_insert(tick);
+            if tick - d >= (0.1 / period) as u64 {
+                break;
+            }
+        }
+    }
+    let _ = Vec6::zeros();
+    Ok(out)
+}
