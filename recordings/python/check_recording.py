@@ -42,6 +42,7 @@ def main():
     ticks = {t: [] for t in ALL_TOPICS}
     counts = {t: 0 for t in ALL_TOPICS}
     truncated = None
+    last_dropped = None
     with open(args.file, "rb") as f:
         reader = NonSeekingReader(f, decoder_factories=[DecoderFactory()])
         try:
@@ -57,6 +58,7 @@ def main():
                     if message.log_time != max(0, round(msg.sim_time * 1e9)):
                         fail(f"/joint_state tick {msg.tick}: log time {message.log_time} is not the simulated time {msg.sim_time} s")
                 elif topic == "/timing":
+                    last_dropped = msg.recorder_dropped
                     stamp = msg.publish_stamp.sec * 1_000_000_000 + msg.publish_stamp.nanosec
                     if stamp != msg.publish_wall_ns:
                         fail(f"/timing tick {msg.tick}: publish_stamp {stamp} != publish_wall_ns {msg.publish_wall_ns}")
@@ -64,7 +66,7 @@ def main():
                     if len(msg.centreline_z) not in (0, len(msg.centreline_pressure)):
                         fail(f"/strip tick {msg.tick}: {len(msg.centreline_z)} z values for {len(msg.centreline_pressure)} pressures")
         except Exception as e:  # a cut file ends in a partial record
-            truncated = f"{type(e).__name__}: {e}"
+            truncated = f"{type(e).__name__}: {e}" if str(e) else f"{type(e).__name__} (the last record is cut)"
 
     ref = ticks["/joint_state"]
     if not ref:
@@ -82,7 +84,9 @@ def main():
     if args.expect_ticks is not None and len(ref) != args.expect_ticks:
         fail(f"{len(ref)} ticks, expected {args.expect_ticks}")
 
-    dropped = "unknown"
+    dropped = last_dropped if last_dropped is not None else "unknown"
+    if truncated is not None and last_dropped:
+        fail(f"the recorder had dropped {last_dropped} records by tick {ref[-1]}")
     if truncated is None:
         with open(args.file, "rb") as f:
             reader = make_reader(f)

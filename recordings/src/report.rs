@@ -273,7 +273,7 @@ pub fn format_text(n: &ReportNumbers) -> String {
                     share * 100.0,
                     BOND_PRESSURE_PA * 1e-3
                 ),
-                None => writeln!(s, "bond        no centre-line pressure recorded"),
+                None => writeln!(s, "bond        no centre-line pressure or node positions (metadata centreline_z_m) recorded"),
             };
         }
     }
