@@ -239,7 +239,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
 
     let mut answers: Vec<Option<[f64; DOF]>> = vec![None; n];
     let t_first = rec.joint_state[0].sim_time_s;
-    let started = Instant::now();
+    let mut started = Instant::now();
     let watchdog = Duration::from_secs_f64(args.watchdog.max(0.001));
     for i in 0..n {
         let mut state = rec.joint_state[i];
@@ -247,27 +247,26 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
         let mut wrench = rec.wrench[i];
         wrench.contract_version = messages::CONTRACT_VERSION;
         let tick = state.tick;
+        if i == 0 && child.0.is_some() {
+            // The started controller joins late and gets no history: republish the first tick
+            // every 5 ms until it answers (as the plant does), then start the clock.
+            answers[0] = Some(handshake(&ports, &state, &wrench, &mut child, &rig)?);
+            started = Instant::now();
+            continue;
+        }
         if lockstep {
             ports.publish(&state, &wrench)?;
-            let give_up = Instant::now() + if i == 0 { Duration::from_secs(15) } else { watchdog };
+            let give_up = Instant::now() + watchdog;
             loop {
-                // Before the first answer, republish tick 0 every 5 ms (no history for late joiners).
-                let step = if i == 0 { Instant::now() + Duration::from_millis(5) } else { give_up };
-                let woke = ports.wait_torque(step.min(give_up));
+                ports.wait_torque(give_up);
                 if let Some(t) = ports.receive_torque_for(tick) {
                     answers[i] = Some(t.tau);
                     break;
                 }
                 child.check_alive()?;
                 if Instant::now() >= give_up {
-                    if i == 0 {
-                        bail!("no controller answered tick {tick} on rig {rig} within 15 s");
-                    }
                     tracing::warn!(tick, "no torque within the watchdog; continuing");
                     break;
-                }
-                if i == 0 && woke == Wake::Timeout {
-                    ports.publish(&state, &wrench)?;
                 }
             }
         } else {
@@ -319,6 +318,33 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
         std::fs::write(p, serde_json::to_string_pretty(&outcome)? + "\n").with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(outcome)
+}
+
+/// Publishes the first state every 5 ms until the controller answers it (15 s at most).
+fn handshake(
+    ports: &PlantPorts,
+    state: &messages::JointState,
+    wrench: &messages::Wrench,
+    child: &mut ChildGuard,
+    rig: &str,
+) -> anyhow::Result<[f64; DOF]> {
+    let give_up = Instant::now() + Duration::from_secs(15);
+    loop {
+        ports.publish(state, wrench)?;
+        let step = Instant::now() + Duration::from_millis(5);
+        while ports.wait_torque(step) == Wake::Notified {
+            if let Some(t) = ports.receive_torque_for(state.tick) {
+                return Ok(t.tau);
+            }
+        }
+        if let Some(t) = ports.receive_torque_for(state.tick) {
+            return Ok(t.tau);
+        }
+        child.check_alive()?;
+        if Instant::now() >= give_up {
+            bail!("the controller answered no state on rig {rig} within 15 s");
+        }
+    }
 }
 
 pub fn format_outcome(o: &ReplayOutcome) -> String {
