@@ -92,7 +92,8 @@ pub fn cholesky_solve(m: Mat6, b: Vec6) -> Vec6 {
             ld[k] = l[j][k] * diag[k];
             d -= l[j][k] * ld[k];
         }
-        if !(d > 0.0) {
+        // Also catches NaN pivots.
+        if d.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return Vec6::from_element(f64::NAN);
         }
         let inv = 1.0 / d;

@@ -102,7 +102,7 @@ impl Robot {
             let i_rot = child.i.rotated_x(dh.cos_alpha, dh.sin_alpha).rotated_z(c, s);
             let h_rot = to_parent(dh, sc[i + 1], &child.h);
             let offset = V3::new(dh.a * c, dh.a * s, dh.d);
-            composite[i] = self.origin_inertias[i].add(&child.to_parent(i_rot, h_rot, &offset));
+            composite[i] = self.origin_inertias[i].add(&child.shifted_to_parent(i_rot, h_rot, &offset));
         }
         let mut m = Mat6::zeros();
         for j in 0..6 {

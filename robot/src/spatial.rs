@@ -125,12 +125,12 @@ impl OriginInertia {
         (self.i.mul(w) + self.h.cross(v), v * self.m - self.h.cross(w))
     }
 
-    /// Re-express about a parent origin: `rotate` maps this frame's axes into the parent's
-    /// (applied to the inertia by `rotate_sym`), `p` is this origin in the parent frame.
-    /// Parallel-axis shift: `I' = R I R^T + 2 (h.p) E - p h^T - h p^T + m (|p|^2 E - p p^T)`,
-    /// with `h` already rotated.
+    /// Re-express about a parent origin, given this inertia and first moment already rotated
+    /// into parent axes (`i_rot = R I R^T`, `h_rot = R h`) and `p`, this origin in the parent
+    /// frame. Parallel-axis shift:
+    /// `I' = R I R^T + 2 (h.p) E - p h^T - h p^T + m (|p|^2 E - p p^T)`, `h' = h + m p`.
     #[inline(always)]
-    pub fn to_parent(&self, i_rot: Sym3, h_rot: V3, p: &V3) -> OriginInertia {
+    pub fn shifted_to_parent(&self, i_rot: Sym3, h_rot: V3, p: &V3) -> OriginInertia {
         let m = self.m;
         let k = 2.0 * h_rot.dot(p) + m * p.norm_squared();
         // -p h^T - h p^T - m p p^T = -(p (h + m p / 2)^T + (h + m p / 2) p^T)
