@@ -46,6 +46,21 @@ pub fn so3_log(r: &Matrix3<f64>) -> Vector3<f64> {
     axis * theta
 }
 
+/// Hybrid impedance along the strip normal (6.3): a_y = (F_r − F_e + u_I − b_d ẏ)/m_d with the
+/// integral u_I = k_i ∫(F_r − F_e) dt advanced by `dt` and clamped to ±`integral_limit_n`
+/// (anti-windup). Forces on the strip along task y (negative = pressing); shared with the 1-DOF
+/// analysis of `rig design`.
+#[inline]
+pub fn impedance_accel(g: &Gains, integral_ns: &mut f64, force_ref_n: f64, force_meas_n: f64, vel_y_mps: f64, dt: f64) -> f64 {
+    let f = &g.force;
+    let err = force_ref_n - force_meas_n;
+    if f.k_i_per_s > 0.0 {
+        let limit_ns = g.integral_limit_n / f.k_i_per_s;
+        *integral_ns = (*integral_ns + err * dt).clamp(-limit_ns, limit_ns);
+    }
+    (err + f.k_i_per_s * *integral_ns - f.b_d_nspm * vel_y_mps) / f.m_d_kg
+}
+
 /// Kinematic quantities of the TCP for one state, computed once per tick.
 #[derive(Clone, Copy, Debug)]
 pub struct TcpKinematics {
@@ -154,14 +169,7 @@ impl ControlLaw {
         let pos_err = r.pos_m - kin.pos_task_m;
         let mut a_task = r.acc_mps2 + pos_err * g.kp_pos + (r.vel_mps - kin.vel_task_mps) * g.kd_pos;
         if r.force_mode {
-            let f = &g.force;
-            let err = r.force_y_n - force_meas_n;
-            if f.k_i_per_s > 0.0 {
-                let limit_ns = g.integral_limit_n / f.k_i_per_s;
-                self.integral_ns = (self.integral_ns + err * dt).clamp(-limit_ns, limit_ns);
-            }
-            let u_i = f.k_i_per_s * self.integral_ns;
-            a_task.y = (err + u_i - f.b_d_nspm * kin.vel_task_mps.y) / f.m_d_kg;
+            a_task.y = impedance_accel(g, &mut self.integral_ns, r.force_y_n, force_meas_n, kin.vel_task_mps.y, dt);
         } else {
             self.integral_ns = 0.0;
         }

@@ -1,2 +1,10 @@
+//! `rig design` (issue 6): the thesis' Chapter 6 force-loop analysis from the actual strip and
+//! robot models ([`cli`]), plus in-process servo simulations ([`servo`]: 6-DOF, [`sim1`]: 1-DOF)
+//! and the acceptance figures measured from recordings ([`metrics`]).
+
+pub mod cli;
+pub mod freq;
 pub mod metrics;
+pub mod plant1;
 pub mod servo;
+pub mod sim1;

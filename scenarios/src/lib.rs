@@ -286,7 +286,8 @@ pub struct ControllerConfig {
     pub joint_damping_nms: f64,
     /// Driving-point stiffness of the strip under the wheel, N/m: the force-loop design rule's
     /// plant (controller::gains). The controller does not link the strip model, so the value
-    /// comes from here; the default is the strip model's static report (10 N wheel at mid-strip).
+    /// comes from here; the default is 1/G(0) of the default reduced model (1 mm mesh, bonded)
+    /// under the wheel at z_a = 20 mm, as `rig design` reports it.
     pub strip_stiffness_n_per_m: f64,
 }
 
@@ -301,7 +302,7 @@ impl Default for ControllerConfig {
             motion_damping_ratio: 1.0,
             rotation_bandwidth_hz: 10.0,
             joint_damping_nms: 0.0,
-            strip_stiffness_n_per_m: 3.0e4,
+            strip_stiffness_n_per_m: 2.87e4,
         }
     }
 }

@@ -1,0 +1,74 @@
+//! 1-DOF servo run (thesis Section 6.4, Figure 6.7): the wheel as a point mass m_w moving along
+//! the strip exactly on the z reference, its height force-controlled by the 1-DOF law (6.2)
+//! u = m_w a + F_e with the controller's own impedance/integral law
+//! (`controller::law::impedance_accel`) and references (`controller::reference`), on the full
+//! strip model with its bulge through the plant's contact (`plant_sim::contact`).
+
+use controller::gains::Gains;
+use controller::law::impedance_accel;
+use controller::reference::{Phase, ReferenceGenerator, ReferenceParams};
+use nalgebra::{Matrix3, Vector3};
+use plant_sim::contact::{ContactGeometry, StripContact};
+use recordings::{StripRecord, MAX_CENTRELINE};
+use robot::Vec6;
+use scenario::Scenario;
+use strip::StripModel;
+
+use crate::servo::ServoSample;
+
+/// Run the 1-DOF servo of scenario `s` with wheel mass `wheel_mass_kg` and `gains`.
+pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: f64) -> Vec<ServoSample> {
+    let geo = ContactGeometry::from_scenario(s);
+    let period = s.loop_.period_s;
+    let n_sub = s.loop_.substeps as usize;
+    let h = period / n_sub as f64;
+    let mut contact = StripContact::new(model, geo, h);
+    let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
+    let rot: Matrix3<f64> = controller::model::tool_down_rotation();
+    let r_w = geo.wheel_radius_m;
+    // Wheel centre (TCP) in the task frame: z along the strip, y up.
+    let start = reference.params().start_task_m;
+    let (mut y, mut vy, mut z) = (start.y, 0.0, start.z);
+    let mut integral = 0.0;
+    let mut rec = StripRecord { wheel_z_m: 0.0, contact_force_n: 0.0, bottom_force_n: 0.0, max_bottom_pressure_pa: 0.0, top_displacement_m: 0.0, n_centreline: 0, centreline_pressure_pa: [0.0; MAX_CENTRELINE] };
+    let mut out = Vec::new();
+    let mut done_ticks = 0;
+    let (kp, kd) = (gains.kp_pos, gains.kd_pos);
+    for tick in 0..(120.0 / period) as u64 {
+        let t = tick as f64 * period;
+        let f_meas = contact.contact_force_n();
+        let r = reference.update(t, f_meas, y);
+        contact.fill_record(&mut rec);
+        out.push(ServoSample { t_s: t, phase: r.phase, force_ref_n: r.force_y_n, contact_force_n: rec.contact_force_n, bottom_force_n: rec.bottom_force_n, wheel_z_m: rec.wheel_z_m });
+        let a = if r.force_mode {
+            impedance_accel(gains, &mut integral, r.force_y_n, f_meas, vy, period)
+        } else {
+            integral = 0.0;
+            r.acc_mps2.y + kp * (r.pos_m.y - y) + kd * (r.vel_mps.y - vy)
+        };
+        // (6.2): control force with the measured contact force fed forward (F_e = −p).
+        let u = wheel_mass_kg * a + f_meas;
+        // z follows its reference exactly over the tick (motion control is not the 1-DOF's topic).
+        let (z0, vz0) = (z, r.vel_mps.z);
+        for i in 0..n_sub {
+            let tau = i as f64 * h;
+            let zz = z0 + vz0 * tau + 0.5 * r.acc_mps2.z * tau * tau;
+            let vz = vz0 + r.acc_mps2.z * tau;
+            let pos = Vector3::new(geo.strip_start_x_m + zz, geo.strip_y_m, geo.table_z_m + y);
+            let w = contact.substep(&pos, &rot, &Vec6::new(vz, 0.0, vy, 0.0, 0.0, 0.0));
+            // m_w ÿ = u + p (the strip pushes the wheel up with p = −F_e).
+            let acc = (u + w.force_base_n.z) / wheel_mass_kg;
+            y += vy * h + 0.5 * acc * h * h;
+            vy += acc * h;
+        }
+        z = r.pos_m.z + r.vel_mps.z * period + 0.5 * r.acc_mps2.z * period * period;
+        let _ = r_w;
+        if r.phase == Phase::Done {
+            done_ticks += 1;
+            if done_ticks > (0.1 / period) as u64 {
+                break;
+            }
+        }
+    }
+    out
+}
