@@ -58,8 +58,18 @@ pub struct GateConfig {
     pub max_consecutive_misses: u32,
     /// Ticks over which a takeover is blended (0 = switch at once).
     pub blend_ticks: u32,
-    pub safe_stop_damping_nms: f64,
+    /// Joint damping of the safe stop per joint, N m s/rad (see [`safe_stop_damping`]).
+    pub safe_stop_damping_nms: [f64; 6],
     pub torque_limit_nm: [f64; 6],
+}
+
+/// Per-joint safe-stop damping: the scenario's `d_nms`, capped at `0.3 M_ii / T`. The damping
+/// torque is held over a tick like any command, and a held damping torque `−D q̇` on an inertia
+/// `M_ii` has the discrete pole `1 − D T / M_ii`: the wrist (M66 ≈ 5e-4 kg m²) would go unstable
+/// with 20 N m s/rad at T = 1 ms. The cap keeps every pole in [0.7, 1) — what a drive's faster
+/// inner damping loop achieves on the real robot.
+pub fn safe_stop_damping(d_nms: f64, mass_diag: &Vec6, period_s: f64) -> [f64; 6] {
+    std::array::from_fn(|i| d_nms.min(0.3 * mass_diag[i] / period_s))
 }
 
 /// Rare events of one tick, for the recording and the log.
@@ -153,7 +163,7 @@ impl Gate {
     }
 
     fn safe_stop_torque(&self, gravity: &Vec6, qd: &Vec6) -> Vec6 {
-        gravity - qd * self.cfg.safe_stop_damping_nms
+        gravity - qd.component_mul(&Vec6::from(self.cfg.safe_stop_damping_nms))
     }
 
     /// Decide the torque of one tick. `torque` is this tick's answer (None if none arrived in
@@ -202,7 +212,7 @@ impl Gate {
                     let a = b.done_ticks as f64 / self.cfg.blend_ticks as f64;
                     let from = match b.from {
                         BlendFrom::Held(x) => x,
-                        BlendFrom::SafeStop => gravity - qd * self.cfg.safe_stop_damping_nms,
+                        BlendFrom::SafeStop => gravity - qd.component_mul(&Vec6::from(self.cfg.safe_stop_damping_nms)),
                     };
                     if b.done_ticks >= self.cfg.blend_ticks {
                         self.blend = None;
@@ -252,7 +262,7 @@ mod tests {
     const LIMIT: [f64; 6] = [100.0; 6];
 
     fn cfg() -> GateConfig {
-        GateConfig { max_consecutive_misses: 3, blend_ticks: 4, safe_stop_damping_nms: 2.0, torque_limit_nm: LIMIT }
+        GateConfig { max_consecutive_misses: 3, blend_ticks: 4, safe_stop_damping_nms: [2.0; 6], torque_limit_nm: LIMIT }
     }
 
     fn torque(id: u64, tau: f64) -> JointTorque {
@@ -343,6 +353,20 @@ mod tests {
         assert!(text.contains(&format!("version {CONTRACT_VERSION}")), "{text}");
         assert_eq!(gate.refusals(), 3);
         assert_eq!(gate.status(), PlantStatus::SafeStop, "3 refusals in a row reach the limit");
+    }
+
+    /// The capped damping held over a tick is stable on every joint: pole 1 − D T / M in (−1, 1).
+    #[test]
+    fn safe_stop_damping_is_stable_as_a_held_torque() {
+        let robot = robot::Robot::irb2400_with_tool(robot::Tool::default());
+        let m = robot.mass_matrix(&robot::scenario_ik_seed()).diagonal();
+        let d = safe_stop_damping(20.0, &m, 1e-3);
+        for i in 0..6 {
+            let pole = 1.0 - d[i] * 1e-3 / m[i];
+            assert!(pole > 0.0 && pole < 1.0, "joint {}: pole {pole}", i + 1);
+        }
+        assert_eq!(d[1], 20.0, "the heavy shoulder keeps the scenario's damping");
+        assert!(d[5] < 20.0, "the light wrist is capped");
     }
 
     #[test]

@@ -113,7 +113,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let mut gate = Gate::new(GateConfig {
         max_consecutive_misses: l.max_consecutive_misses,
         blend_ticks: (l.takeover_blend_s / l.period_s).round() as u32,
-        safe_stop_damping_nms: l.safe_stop_damping_nms,
+        safe_stop_damping_nms: crate::gate::safe_stop_damping(
+            l.safe_stop_damping_nms,
+            &physics.robot().mass_matrix(&physics.q()).diagonal(),
+            l.period_s,
+        ),
         torque_limit_nm: robot::Robot::TORQUE_LIMIT_NM,
     });
     let ports = messages::ports::PlantPorts::open(&opts.rig, "plant-sim")?;

@@ -1,1 +1,209 @@
-//! End-to-end tests live in tests/tests/.
+//! Helpers for the end-to-end tests in `tests/tests/`: locate the built binaries, give every test
+//! its own rig name and temporary directory, write small scenarios, and start daemons under a
+//! guard that kills them if a test fails.
+//!
+//! The binaries must be built first: `cargo build --release --workspace --bins`.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+/// Directory holding the workspace binaries: the test executable lives in
+/// `target/<profile>/deps/`, the binaries one level up.
+pub fn bin_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let deps = exe.parent().expect("deps dir");
+    deps.parent().expect("profile dir").to_path_buf()
+}
+
+/// Path of a workspace binary; panics with the build command if it is missing.
+pub fn bin(name: &str) -> PathBuf {
+    let p = bin_dir().join(name);
+    assert!(p.is_file(), "{} is missing: run `cargo build --release --workspace --bins` first", p.display());
+    p
+}
+
+/// A rig name unique to this test and process.
+pub fn unique_rig(tag: &str) -> String {
+    let n = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos();
+    format!("e2e-{tag}-{}-{}", std::process::id(), n % 1_000_000_000)
+}
+
+/// A fresh temporary directory for one test (left behind for inspection on failure).
+pub fn temp_dir(rig: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("rig-tests-{rig}"));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Write a scenario for loop tests: no strip (no model build), the given mode, plus `extra` TOML
+/// lines appended inside the given sections (e.g. "[loop]\nlockstep_watchdog_s = 0.2\n").
+pub fn write_scenario(dir: &Path, mode: &str, extra: &str) -> PathBuf {
+    let text = format!("description = \"e2e loop test\"\n[strip]\nenabled = false\n[loop]\nmode = \"{mode}\"\n{extra}");
+    let p = dir.join("scenario.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// A child process that is killed (SIGKILL) and reaped when dropped, unless it already exited.
+pub struct Daemon {
+    pub name: String,
+    pub child: Option<Child>,
+    pub stdout_path: PathBuf,
+    pub stderr_path: PathBuf,
+}
+
+impl Daemon {
+    /// Start `bin` with `args`; stdout and stderr go to files in `dir` named after `name`.
+    pub fn start(name: &str, bin: &Path, args: &[&str], dir: &Path) -> Daemon {
+        let stdout_path = dir.join(format!("{name}.stdout"));
+        let stderr_path = dir.join(format!("{name}.stderr"));
+        let child = Command::new(bin)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(std::fs::File::create(&stdout_path).unwrap())
+            .stderr(std::fs::File::create(&stderr_path).unwrap())
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting {}: {e}", bin.display()));
+        Daemon { name: name.into(), child: Some(child), stdout_path, stderr_path }
+    }
+
+    pub fn pid(&self) -> i32 {
+        self.child.as_ref().map_or(0, |c| c.id() as i32)
+    }
+
+    /// Send a signal (e.g. `libc::SIGKILL`).
+    pub fn signal(&self, sig: i32) {
+        if let Some(c) = &self.child {
+            // SAFETY: signalling our own child.
+            unsafe { libc::kill(c.id() as i32, sig) };
+        }
+    }
+
+    /// Wait up to `timeout` for the process to exit.
+    pub fn wait_timeout(&mut self, timeout: Duration) -> Option<ExitStatus> {
+        let child = self.child.as_mut()?;
+        let t0 = Instant::now();
+        loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                return Some(s);
+            }
+            if t0.elapsed() > timeout {
+                return None;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    /// Wait for the exit or panic (after killing it) with the process's stderr.
+    pub fn expect_exit(&mut self, timeout: Duration) -> ExitStatus {
+        match self.wait_timeout(timeout) {
+            Some(s) => s,
+            None => {
+                self.signal(libc::SIGKILL);
+                panic!("{} did not exit within {timeout:?}; stderr:\n{}", self.name, self.stderr());
+            }
+        }
+    }
+
+    pub fn stdout(&self) -> String {
+        read(&self.stdout_path)
+    }
+    pub fn stderr(&self) -> String {
+        read(&self.stderr_path)
+    }
+}
+
+fn read(p: &Path) -> String {
+    let mut s = String::new();
+    if let Ok(mut f) = std::fs::File::open(p) {
+        let _ = f.read_to_string(&mut s);
+    }
+    s
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            if let Ok(None) = c.try_wait() {
+                let _ = c.kill();
+            }
+            let _ = c.wait();
+        }
+    }
+}
+
+/// Start `plant-sim` on `rig` with `scenario`, recording to `dir/run.mcap`.
+pub fn start_plant(rig: &str, scenario: &Path, dir: &Path, duration_s: f64, extra: &[&str]) -> Daemon {
+    let out = dir.join("run.mcap");
+    let dur = duration_s.to_string();
+    let mut args = vec!["--rig", rig, "--scenario", scenario.to_str().unwrap(), "--duration", &dur, "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    Daemon::start("plant", &bin("plant-sim"), &args, dir)
+}
+
+/// Start a controller binary (`controller` or `hold-controller`) on `rig`.
+pub fn start_controller(name: &str, bin_name: &str, rig: &str, scenario: &Path, dir: &Path, extra: &[&str]) -> Daemon {
+    let mut args = vec!["--rig", rig, "--scenario", scenario.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    Daemon::start(name, &bin(bin_name), &args, dir)
+}
+
+/// The plant's one-line JSON summary from its stdout.
+pub fn plant_summary(d: &Daemon) -> serde_json::Value {
+    let out = d.stdout();
+    out.lines()
+        .rev()
+        .find_map(|l| serde_json::from_str(l).ok())
+        .unwrap_or_else(|| panic!("no JSON summary on the plant's stdout:\n{out}\nstderr:\n{}", d.stderr()))
+}
+
+/// Wait until `needle` appears in a daemon's log (stderr), e.g. the plant's "connected" line.
+pub fn wait_for_log(d: &Daemon, needle: &str, timeout: Duration) {
+    let t0 = Instant::now();
+    while t0.elapsed() < timeout {
+        if d.stderr().contains(needle) {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    panic!("{:?} not in {}'s log within {timeout:?}:\n{}", needle, d.name, d.stderr());
+}
+
+/// One test's rig: its name, temporary directory and loop scenario (no strip).
+pub struct TestRig {
+    pub rig: String,
+    pub dir: PathBuf,
+    pub scenario: PathBuf,
+}
+
+impl TestRig {
+    pub fn new(tag: &str, mode: &str) -> TestRig {
+        let rig = unique_rig(tag);
+        let dir = temp_dir(&rig);
+        let scenario = write_scenario(&dir, mode, "");
+        TestRig { rig, dir, scenario }
+    }
+
+    pub fn plant(&self, duration_s: f64) -> Daemon {
+        start_plant(&self.rig, &self.scenario, &self.dir, duration_s, &[])
+    }
+
+    pub fn controller(&self, name: &str, bin_name: &str, extra: &[&str]) -> Daemon {
+        start_controller(name, bin_name, &self.rig, &self.scenario, &self.dir, extra)
+    }
+
+    /// Start the plant and the `controller` binary and wait until the plant reports it connected.
+    pub fn running(&self, duration_s: f64) -> (Daemon, Daemon) {
+        let plant = self.plant(duration_s);
+        let ctrl = self.controller("controller", "controller", &[]);
+        wait_for_log(&plant, "connected", Duration::from_secs(10));
+        (plant, ctrl)
+    }
+
+    pub fn recording(&self) -> PathBuf {
+        self.dir.join("run.mcap")
+    }
+}

@@ -19,7 +19,8 @@ struct Args {
     rig: String,
     #[arg(long)]
     scenario: std::path::PathBuf,
-    /// Pretend to speak another contract version (testing the refusal).
+    /// Pretend to speak another contract version (testing the plant's refusal): the torques carry
+    /// this version, and the plant's states are NOT checked against it, so the plant gets to refuse.
     #[arg(long, default_value_t = CONTRACT_VERSION)]
     contract_version: u32,
     /// Constant torque added to joint 1, N m (to make this controller's output recognisable).
@@ -64,10 +65,10 @@ fn run(a: &Args) -> anyhow::Result<()> {
         };
         let t0 = Instant::now();
         last_state = t0;
-        if st.contract_version != a.contract_version {
+        if a.contract_version == CONTRACT_VERSION && st.contract_version != CONTRACT_VERSION {
             anyhow::bail!(
                 "{}",
-                messages::check_version(a.contract_version, st.contract_version, "joint state").unwrap_err()
+                messages::check_version(CONTRACT_VERSION, st.contract_version, "joint state").unwrap_err()
             );
         }
         if st.plant_status == PlantStatus::ShuttingDown as u32 {
