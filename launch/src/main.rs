@@ -3,7 +3,8 @@
 //! - `rig run [SCENARIO.toml] [--mode realtime|lockstep] [--controller PATH] [--duration S] [--out DIR]`
 //!   starts `plant-sim` and a controller on a fresh rig name, supervises them and prints a summary.
 //! - `rig timing [--seconds N]`: a real-time timing run with latency and jitter distributions.
-//! - `rig robot ...`: checks of the robot model (see `robot::cli`).
+//! - `rig robot ...`, `rig model ...`, `rig replay`, `rig report`, `rig design`: the tools of the
+//!   robot, strip, recordings and design crates.
 
 mod summary;
 mod supervise;
@@ -32,8 +33,17 @@ enum Cmd {
         #[command(subcommand)]
         cmd: robot::cli::Command,
     },
-    // TODO(rig): `model` (strip::cli), `replay`/`report` (recordings::cli) and `design` are wired
-    // in as those modules land.
+    /// Weatherstrip model: build (cached), verify (Table D.1, static response), export (.npz).
+    Model {
+        #[command(subcommand)]
+        cmd: strip::cli::Command,
+    },
+    /// Republish a recording onto a rig (optionally driving a controller open-loop and comparing).
+    Replay(recordings::cli::ReplayArgs),
+    /// Figures and numbers from a recording.
+    Report(recordings::cli::ReportArgs),
+    /// Force-loop design from the actual models (thesis Chapter 6).
+    Design(design::cli::DesignArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -138,6 +148,14 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
                 print!("{}", summary::timing_report(v));
             }
             print!("{}", summary::run_summary(v));
+            if !timing {
+                if let Some(path) = v.get("recording").and_then(serde_json::Value::as_str) {
+                    match recordings::cli::summary_numbers(Path::new(path)) {
+                        Ok(n) => print!("{}", recordings::report::format_text(&n)),
+                        Err(e) => eprintln!("rig: could not read back {path}: {e:#}"),
+                    }
+                }
+            }
             if let Some(p) = json_out {
                 std::fs::write(p, serde_json::to_string_pretty(v)?).with_context(|| format!("writing {}", p.display()))?;
             }
@@ -204,6 +222,10 @@ fn main() {
             launch_and_report(&l, true, a.json.as_deref())
         })(),
         Cmd::Robot { cmd } => robot::cli::run(cmd).map(|_| 0),
+        Cmd::Model { cmd } => strip::cli::run(cmd).map(|_| 0),
+        Cmd::Replay(a) => recordings::cli::replay(a).map(|_| 0),
+        Cmd::Report(a) => recordings::cli::report(a).map(|_| 0),
+        Cmd::Design(a) => design::cli::run(a).map(|_| 0),
     };
     match result {
         Ok(code) => std::process::exit(code),
