@@ -1,6 +1,7 @@
-//! Recursive Newton-Euler and the composite rigid body algorithm in the links' own DH frames (Luh-Walker-Paul form, e.g. Siciliano et
-//! al. (7.107)-(7.111)): no per-call inertia rotations, only the structured rotations
-//! `Rz(q) Rx(alpha)` between neighbouring frames. The fastest way to evaluate (7.1) and (7.2).
+//! Recursive Newton-Euler (Luh-Walker-Paul form, e.g. Siciliano et al. (7.107)-(7.111)) and the
+//! composite rigid body algorithm, both in the links' own DH frames: no per-call inertia
+//! rotations into the base, only the structured rotations `Rz(q) Rx(alpha)` between
+//! neighbouring frames. The fastest way here to evaluate (7.1) and (7.2).
 
 use crate::model::{DhConst, Robot};
 use crate::spatial::{BodyInertia, OriginInertia, V3};
