@@ -101,6 +101,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         budget_ns: (l.torque_budget_us * 1e3).round() as u64,
         watchdog_ns: (l.lockstep_watchdog_s * 1e9).round() as u64,
         n_ticks: (duration_s / l.period_s).round() as u64,
+        spin_ns: if mode == Mode::Realtime { (l.spin_wait_us * 1e3).round() as u64 } else { 0 },
     };
 
     let cleaned = messages::ports::clean_dead_nodes();
@@ -128,7 +129,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
             if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
                 std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
             }
-            let metadata = vec![
+            let mut metadata = vec![
                 ("rig".to_string(), opts.rig.clone()),
                 ("mode".to_string(), format!("{mode:?}").to_lowercase()),
                 ("scenario_path".to_string(), opts.scenario_path.display().to_string()),
@@ -138,6 +139,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
                 ("substeps".to_string(), l.substeps.to_string()),
                 ("integrator".to_string(), "rk4".to_string()),
             ];
+            // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
+            if let Some(c) = physics.contact() {
+                metadata.push(("centreline_z_m".to_string(), format!("{:?}", c.centreline_z_m())));
+            }
             let cfg = RecorderConfig {
                 path: path.clone(),
                 queue_capacity: scenario.recording.queue_capacity,
