@@ -26,8 +26,8 @@ pub enum ReadError {
     Truncated { path: PathBuf, ticks: usize, reason: String },
     #[error("{path} is an MCAP file but not a rig recording: it has no {topic} channel with schema {schema}")]
     Foreign { path: PathBuf, topic: &'static str, schema: &'static str },
-    #[error("{path}: channel {topic} has schema {found:?} ({encoding}/{msg_encoding}), this reader knows {expected:?} (ros2msg/cdr) with other fields; the file was written by another version")]
-    SchemaMismatch { path: PathBuf, topic: String, found: String, expected: &'static str, encoding: String, msg_encoding: String },
+    #[error("{path}: channel {topic} has schema {found}, this reader knows {expected:?} (ros2msg/cdr) with other fields; the file was written by another version")]
+    SchemaMismatch { path: PathBuf, topic: String, found: String, expected: &'static str },
     #[error("{path}: message {sequence} on {topic} does not decode: {source}")]
     Decode { path: PathBuf, topic: String, sequence: u32, source: crate::cdr::CdrError },
 }
@@ -132,10 +132,8 @@ impl Recording {
                 _ => rec.events.push(schema::decode_event(data, m.publish_time).map_err(bad)?),
             }
         }
-        if !rec.metadata.contains_key("rig") && rec.joint_state.is_empty() {
-            if rec.truncated.is_none() {
-                return Err(ReadError::Foreign { path: path.into(), topic: CHANNELS[0].topic, schema: CHANNELS[0].schema_name });
-            }
+        if !rec.metadata.contains_key("rig") && rec.joint_state.is_empty() && rec.truncated.is_none() {
+            return Err(ReadError::Foreign { path: path.into(), topic: CHANNELS[0].topic, schema: CHANNELS[0].schema_name });
         }
         Ok(rec)
     }
@@ -237,10 +235,8 @@ fn check_schema(path: &Path, ch: &mcap::Channel, idx: usize) -> Result<(), ReadE
         return Err(ReadError::SchemaMismatch {
             path: path.into(),
             topic: ch.topic.clone(),
-            found: name,
+            found: format!("{name:?} ({encoding}/{})", ch.message_encoding),
             expected: def.schema_name,
-            encoding,
-            msg_encoding: ch.message_encoding.clone(),
         });
     }
     Ok(())

@@ -77,19 +77,18 @@ pub fn compare_torques(rec: &Recording, answers: &[Option<[f64; DOF]>], blend_ti
             continue;
         };
         c.ticks_compared += 1;
-        for j in 0..DOF {
-            let d = tau[j] - row.torque.tau[j];
-            if tau[j].to_bits() != row.torque.tau[j].to_bits() {
+        for (j, (a, b)) in tau.iter().zip(&row.torque.tau).enumerate() {
+            if a.to_bits() != b.to_bits() {
                 c.identical = false;
                 c.first_difference_tick.get_or_insert(row.tick);
             }
-            c.max_abs_nm[j] = c.max_abs_nm[j].max(d.abs());
-            sq[j] += d * d;
+            c.max_abs_nm[j] = c.max_abs_nm[j].max((a - b).abs());
+            sq[j] += (a - b) * (a - b);
         }
     }
     if c.ticks_compared > 0 {
-        for j in 0..DOF {
-            c.rms_nm[j] = (sq[j] / c.ticks_compared as f64).sqrt();
+        for (rms, s) in c.rms_nm.iter_mut().zip(sq) {
+            *rms = (s / c.ticks_compared as f64).sqrt();
         }
     } else {
         c.identical = false;

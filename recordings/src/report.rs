@@ -200,11 +200,10 @@ fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
             None => have_pressure = false,
         }
     }
-    let zs = roll.iter().map(|&i| rec.strip[i].wheel_z_m);
     Some(RollingNumbers {
         ticks: roll.len(),
         z_from_m: rec.strip[roll[0] - 1].wheel_z_m,
-        z_to_m: zs.clone().last().unwrap(),
+        z_to_m: rec.strip[roll[roll.len() - 1]].wheel_z_m,
         rolled_length_m: rolled,
         force_error_max_abs_n: max_abs,
         force_error_rms_n: rms,

@@ -318,6 +318,7 @@ impl Drop for Recorder {
     }
 }
 
+#[allow(clippy::large_enum_variant)] // one value at a time, on the writer's stack
 enum Popped {
     Tick(TickHead),
     Event(EventRecord),
