@@ -81,6 +81,10 @@ struct TimingArgs {
     /// Also write the plant's summary JSON (all distributions) to this file.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Let the plant busy-poll for the torque this long before sleeping (scenario
+    /// `loop.spin_wait_us`; default scenario: 0 = no busy polling).
+    #[arg(long, default_value_t = 0.0)]
+    spin_us: f64,
 }
 
 /// UTC time as `YYYYmmdd-HHMMSS`.
@@ -173,7 +177,7 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
 
 /// The timing scenario: the default one without the strip, holding the start pose (no approach),
 /// in real-time mode, written next to the recording.
-fn timing_scenario(dir: &Path) -> anyhow::Result<PathBuf> {
+fn timing_scenario(dir: &Path, spin_us: f64) -> anyhow::Result<PathBuf> {
     let default = scenario::Scenario::default_file();
     let text = std::fs::read_to_string(&default).with_context(|| format!("reading {}", default.display()))?;
     let mut doc: toml::Table = text.parse().with_context(|| format!("parsing {}", default.display()))?;
@@ -185,6 +189,7 @@ fn timing_scenario(dir: &Path) -> anyhow::Result<PathBuf> {
     doc.insert("strip".into(), strip.into());
     let mut lp = table(&mut doc, "loop");
     lp.insert("mode".into(), "realtime".into());
+    lp.insert("spin_wait_us".into(), spin_us.into());
     doc.insert("loop".into(), lp.into());
     let mut tr = table(&mut doc, "trajectory");
     // Hold the start pose for the whole run: the loop's timing, not the task, is under test.
@@ -216,7 +221,7 @@ fn main() {
             let dir = a.out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
             let scenario = match a.scenario {
                 Some(s) => s,
-                None => timing_scenario(&dir)?,
+                None => timing_scenario(&dir, a.spin_us)?,
             };
             let l = prepare(rig, scenario, Some("realtime".into()), Some(a.seconds), Some(dir), a.controller)?;
             launch_and_report(&l, true, a.json.as_deref())

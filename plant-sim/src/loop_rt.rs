@@ -39,6 +39,8 @@ pub struct LoopParams {
     pub watchdog_ns: u64,
     /// Ticks to run (the run ends after tick `n_ticks - 1` was integrated).
     pub n_ticks: u64,
+    /// Busy-wait this long for the torque before sleeping in `ppoll` (0 = never spin).
+    pub spin_ns: u64,
 }
 
 /// Statistics of a run, kept in fixed-size histograms.
@@ -211,6 +213,22 @@ impl PlantLoop<'_> {
 
     /// Wait for the torque answering `tick` until `deadline`. Returns it and when it was taken.
     fn wait_for_torque(&self, tick: u64, deadline: Instant) -> Option<JointTorque> {
+        // Optional busy-wait first: a halted vCPU takes tens of µs to wake on the controller's
+        // notification; polling the subscriber (shared memory, no syscall) sees the torque at once.
+        if self.params.spin_ns > 0 {
+            let spin_end = deadline.min(Instant::now() + Duration::from_nanos(self.params.spin_ns));
+            loop {
+                if let Some(t) = self.ports.receive_torque_for(tick) {
+                    // Consume the notification that came with it (non-blocking).
+                    let _ = self.ports.wait_torque(Instant::now());
+                    return Some(t);
+                }
+                if Instant::now() >= spin_end {
+                    break;
+                }
+                std::hint::spin_loop();
+            }
+        }
         loop {
             if let Some(t) = self.ports.receive_torque_for(tick) {
                 return Some(t);

@@ -81,6 +81,9 @@ pub struct LoopConfig {
     pub safe_stop_damping_nms: f64,
     /// How long the torque is blended from the held value to a new controller's value, s.
     pub takeover_blend_s: f64,
+    /// Real-time mode: the plant busy-polls for the torque this long after publishing before it
+    /// sleeps on the event, µs (0 = never spin). Trades CPU for wake-up latency on VMs.
+    pub spin_wait_us: f64,
 }
 
 impl Default for LoopConfig {
@@ -95,6 +98,7 @@ impl Default for LoopConfig {
             substeps: 10,
             safe_stop_damping_nms: 20.0,
             takeover_blend_s: 0.05,
+            spin_wait_us: 0.0,
         }
     }
 }
@@ -369,6 +373,9 @@ impl Scenario {
         }
         if !(l.torque_budget_us > 0.0 && l.torque_budget_us < l.period_s * 1e6) {
             return Err(bad("loop.torque_budget_us", l.torque_budget_us, "must be positive and shorter than the period"));
+        }
+        if !(l.spin_wait_us >= 0.0 && l.spin_wait_us <= l.torque_budget_us) {
+            return Err(bad("loop.spin_wait_us", l.spin_wait_us, "must be in [0, loop.torque_budget_us]"));
         }
         if l.max_consecutive_misses == 0 {
             return Err(bad("loop.max_consecutive_misses", 0.0, "must be at least 1"));
