@@ -49,6 +49,8 @@ pub struct Recording {
     pub events: Vec<EventRow>,
     /// Log time (simulated time, ns) of each `joint_state` row.
     pub log_time_ns: Vec<u64>,
+    /// z of the centre-line nodes as the first `/strip` message carrying them has it, m.
+    pub strip_centreline_z_m: Vec<f32>,
     /// Set if the file ends without summary and footer: why reading stopped.
     pub truncated: Option<String>,
 }
@@ -126,7 +128,13 @@ impl Recording {
                 }
                 1 => rec.joint_torque.push(schema::decode_joint_torque(data).map_err(bad)?),
                 2 => rec.wrench.push(schema::decode_wrench(data).map_err(bad)?),
-                3 => rec.strip.push(schema::decode_strip(data).map_err(bad)?),
+                3 => {
+                    let (row, z) = schema::decode_strip(data, rec.strip_centreline_z_m.is_empty()).map_err(bad)?;
+                    if let Some(z) = z {
+                        rec.strip_centreline_z_m = z;
+                    }
+                    rec.strip.push(row);
+                }
                 4 => rec.controller.push(schema::decode_controller(data).map_err(bad)?),
                 5 => rec.timing.push(schema::decode_timing(data).map_err(bad)?),
                 _ => rec.events.push(schema::decode_event(data, m.publish_time).map_err(bad)?),
@@ -205,7 +213,7 @@ impl Recording {
         if let Some(z) = self.rig_metadata("centreline_z_m").and_then(|j| schema::parse_f64_list(j).ok()) {
             return z;
         }
-        self.strip.first().map_or(Vec::new(), |s| s.centreline_z_m.iter().map(|&z| z as f64).collect())
+        self.strip_centreline_z_m.iter().map(|&z| z as f64).collect()
     }
 
     /// Index of the `/controller` row for each tick row (None where the controller sent none).

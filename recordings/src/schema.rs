@@ -326,9 +326,8 @@ pub struct StripRow {
     pub max_bottom_pressure_pa: f64,
     pub top_displacement_m: f64,
     /// Pa, by centre-line node (stored as f32: a 0.1 Pa resolution is ample against 100 kPa).
+    /// Their z: [`crate::read::Recording::centreline_z_m`].
     pub centreline_pressure_pa: Vec<f32>,
-    /// m, z of the centre-line nodes.
-    pub centreline_z_m: Vec<f32>,
 }
 
 /// A `/timing` message.
@@ -394,9 +393,10 @@ pub fn decode_wrench(msg: &[u8]) -> Result<Wrench, CdrError> {
     Ok(Wrench { contract_version: CONTRACT_VERSION, frame, tick, force, torque })
 }
 
-pub fn decode_strip(msg: &[u8]) -> Result<StripRow, CdrError> {
+/// Decodes a `/strip` message; its `centreline_z` (the same every tick) only if `want_z`.
+pub fn decode_strip(msg: &[u8], want_z: bool) -> Result<(StripRow, Option<Vec<f32>>), CdrError> {
     let mut r = CdrReader::new(msg)?;
-    Ok(StripRow {
+    let row = StripRow {
         tick: r.u64("tick")?,
         wheel_z_m: r.f64("wheel_z")?,
         contact_force_n: r.f64("contact_force")?,
@@ -404,8 +404,9 @@ pub fn decode_strip(msg: &[u8]) -> Result<StripRow, CdrError> {
         max_bottom_pressure_pa: r.f64("max_bottom_pressure")?,
         top_displacement_m: r.f64("top_displacement")?,
         centreline_pressure_pa: r.f32_seq("centreline_pressure")?,
-        centreline_z_m: r.f32_seq("centreline_z")?,
-    })
+    };
+    let z = if want_z { Some(r.f32_seq("centreline_z")?) } else { None };
+    Ok((row, z))
 }
 
 pub fn decode_controller(msg: &[u8]) -> Result<ControllerDiagnostics, CdrError> {
@@ -552,12 +553,12 @@ mod tests {
         let nsec = u32::from_le_bytes(buf[16..20].try_into().unwrap()) as u64;
         assert_eq!(sec * 1_000_000_000 + nsec, r.timing.publish_wall_ns);
         encode_strip(&mut buf, &r, &p, &[0.001, 0.002, 0.003]);
-        let s = decode_strip(&buf).unwrap();
+        let (s, z) = decode_strip(&buf, true).unwrap();
         assert_eq!(s.tick, 41);
         assert_eq!(s.wheel_z_m, 0.012);
         assert_eq!(s.max_bottom_pressure_pa, 123_456.5);
         assert_eq!(s.centreline_pressure_pa, vec![1.5, 100_000.25, 2.0]);
-        assert_eq!(s.centreline_z_m, vec![0.001, 0.002, 0.003]);
+        assert_eq!(z.unwrap(), vec![0.001, 0.002, 0.003]);
         let e = EventRecord::new(41, 0.041, EventKind::SafeStop, "20 misses in a row");
         encode_event(&mut buf, &e);
         let d = decode_event(&buf, e.wall_ns).unwrap();
