@@ -65,6 +65,18 @@ pub struct RollingNumbers {
     pub bond_pressure_share: Option<f64>,
 }
 
+/// Events listed in the report (a run with more lists the first ones; the file has all).
+pub const EVENTS_LISTED: usize = 30;
+
+/// One event as the report lists it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EventLine {
+    pub tick: u64,
+    pub sim_time_s: f64,
+    pub kind: String,
+    pub text: String,
+}
+
 /// Everything `rig report` prints and writes as JSON.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ReportNumbers {
@@ -84,6 +96,8 @@ pub struct ReportNumbers {
     /// Records the recorder dropped (must be 0).
     pub dropped: u64,
     pub events: usize,
+    /// The first [`EVENTS_LISTED`] events, in order.
+    pub event_list: Vec<EventLine>,
     /// Round trip publish -> torque received, us, over ticks whose torque arrived in time.
     pub latency_us: Option<Percentiles>,
     /// Plant compute time per tick, us.
@@ -160,6 +174,12 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         safe_stops,
         dropped: rec.dropped(),
         events: rec.events.len(),
+        event_list: rec
+            .events
+            .iter()
+            .take(EVENTS_LISTED)
+            .map(|e| EventLine { tick: e.tick, sim_time_s: e.sim_time_s, kind: e.kind_name.clone(), text: e.text.clone() })
+            .collect(),
         latency_us: Percentiles::of(latency),
         plant_compute_us: Percentiles::of(plant),
         rolling: rolling_numbers(rec),
@@ -233,6 +253,12 @@ pub fn format_text(n: &ReportNumbers) -> String {
     let _ = writeln!(s, "safe stops  {}", n.safe_stops);
     let _ = writeln!(s, "dropped     {}{}", n.dropped, if n.dropped > 0 { "  (RECORDING INCOMPLETE)" } else { "" });
     let _ = writeln!(s, "events      {}", n.events);
+    for e in &n.event_list {
+        let _ = writeln!(s, "  {:>9.3} s  tick {:<7} {:<18} {}", e.sim_time_s, e.tick, e.kind, e.text);
+    }
+    if n.events > n.event_list.len() {
+        let _ = writeln!(s, "  ... {} more in /events", n.events - n.event_list.len());
+    }
     let pct = |name: &str, p: &Option<Percentiles>, s: &mut String| {
         let _ = match p {
             Some(p) => writeln!(

@@ -24,6 +24,9 @@ fn report_on_a_known_recording_gives_the_known_numbers() {
     assert_eq!(n.safe_stops, 1);
     assert_eq!(n.dropped, 0);
     assert_eq!(n.events, 4);
+    let kinds: Vec<&str> = n.event_list.iter().map(|e| e.kind.as_str()).collect();
+    assert_eq!(kinds, ["start", "safe_stop", "safe_stop_cleared", "stop"]);
+    assert_eq!((n.event_list[1].tick, n.event_list[1].text.as_str()), (run.ticks / 2, "synthetic safe stop"));
 
     // Latency: smallest value with at least p of the in-time ticks at or below it, counted
     // directly from the run's round-trip law.
