@@ -99,6 +99,17 @@ fn replay_into_the_same_controller_reproduces_its_torques_and_a_changed_one_show
     let rec = Recording::open_complete(&file).unwrap();
     let ticks = rec.check_continuity().unwrap();
     assert_eq!(rec.joint_state.len(), 300, "{ticks:?}");
+    assert_eq!(rec.dropped(), 0);
+    // The official Python reader finds the same 300 ticks on every channel (when installed).
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("python/check_recording.py");
+    match Command::new("python3").arg(&script).arg(&file).args(["--expect-ticks", "300"]).output() {
+        Ok(o) if o.status.code() == Some(0) => {}
+        Ok(o) if String::from_utf8_lossy(&o.stderr).contains("ModuleNotFoundError") => {
+            println!("SKIP (python part): pip install mcap mcap-ros2-support")
+        }
+        Ok(o) => panic!("python check failed: {}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr)),
+        Err(e) => println!("SKIP (python part): no python3: {e}"),
+    }
 
     let args = |controller: PathBuf| ReplayArgs {
         file: file.clone(),
