@@ -8,3 +8,4 @@ pub mod metrics;
 pub mod plant1;
 pub mod servo;
 pub mod sim1;
+pub mod stress;
