@@ -189,6 +189,16 @@ pub struct Reduced {
     pub hsv: Vec<f64>,
     /// Relative DC-gain mismatch left by rounding before it was folded into D.
     pub dc_residual_rel: f64,
+    /// Sub-stage wall times (s).
+    pub timings: Vec<(String, f64)>,
+}
+
+/// SVD Z = U diag(s) V^T of the square-root product L_o^T L_c.
+fn hankel_svd(z: &Mat<f64>) -> Result<(Mat<f64>, Vec<f64>, Mat<f64>)> {
+    let n = z.nrows();
+    let svd = z.svd().map_err(|e| numeric("balanced truncation SVD", format!("{e:?}")))?;
+    let sig = (0..n).map(|i| svd.S().column_vector()[i]).collect();
+    Ok((svd.U().to_owned(), sig, svd.V().to_owned()))
 }
 
 fn cholesky_factor(p: &Mat<f64>, what: &'static str) -> Result<Mat<f64>> {
@@ -224,6 +234,13 @@ pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) 
         g: sys.g.clone(),
         h: Mat::from_fn(sys.h.nrows(), sys.h.ncols(), |i, j| sys.h[(i, j)] * out_weight[i]),
     };
+    let mut tm = std::time::Instant::now();
+    let mut laps: Vec<(String, f64)> = Vec::new();
+    let mut lap = |name: &str, laps: &mut Vec<(String, f64)>| {
+        let now = std::time::Instant::now();
+        laps.push((format!("bt_{name}"), (now - tm).as_secs_f64()));
+        tm = now;
+    };
     crate::progress::stage("Gramians");
     let mut p = weighted.gramian(false);
     let mut q = weighted.gramian(true);
@@ -236,21 +253,23 @@ pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) 
             q[(i, j)] *= sc[i] * sc[j];
         }
     }
+    lap("gramians", &mut laps);
     let lc = cholesky_factor(&p, "controllability")?;
     let lo = cholesky_factor(&q, "observability")?;
     drop((p, q));
+    lap("cholesky", &mut laps);
     crate::progress::stage("Hankel SVD");
     let z = lo.transpose() * &lc;
-    let svd = z.svd().map_err(|e| numeric("balanced truncation SVD", format!("{e:?}")))?;
-    let sig: Vec<f64> = (0..n).map(|i| svd.S().column_vector()[i]).collect();
+    let (u_mat, sig, v_mat) = hankel_svd(&z)?;
     if !(sig[order - 1] > 0.0) {
         return Err(numeric("balanced truncation", "Hankel singular values vanish before the order"));
     }
+    lap("svd", &mut laps);
     crate::progress::stage("matched-DC truncation");
     let floor = sig[0] * 1e-300_f64.max(f64::EPSILON * 1e-4);
     let isq: Vec<f64> = sig.iter().map(|&s| 1.0 / s.max(floor).sqrt()).collect();
     // T = Lc V S^-1/2, Tinv = S^-1/2 U^T Lo^T
-    let mut t = &lc * svd.V();
+    let mut t = &lc * &v_mat;
     for j in 0..n {
         let f = isq[j];
         t.col_mut(j).iter_mut().for_each(|v| *v *= f);
@@ -259,7 +278,7 @@ pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) 
         let f = sc[i];
         t.row_mut(i).iter_mut().for_each(|v| *v *= f);
     }
-    let mut tinv = svd.U().transpose() * lo.transpose();
+    let mut tinv = u_mat.transpose() * lo.transpose();
     for i in 0..n {
         let f = isq[i];
         tinv.row_mut(i).iter_mut().for_each(|v| *v *= f);
@@ -268,11 +287,24 @@ pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) 
         let f = 1.0 / sc[j];
         tinv.col_mut(j).iter_mut().for_each(|v| *v *= f);
     }
-    let (am, bm, cm) = sys.state_space();
-    let at = &am * &t;
+    lap("transforms", &mut laps);
+    // A_m, B_m, C_m are structured (2x2 blocks, half-zero rows/columns): apply them directly
+    let nm = sys.omega2.len();
+    let mut at = Mat::<f64>::zeros(n, n); // A_m T
+    for i in 0..nm {
+        let (a, c) = (sys.omega2[i], sys.damp[i]);
+        for j in 0..n {
+            let (t0, t1) = (t[(2 * i, j)], t[(2 * i + 1, j)]);
+            at[(2 * i, j)] = t1;
+            at[(2 * i + 1, j)] = -a * t0 - c * t1;
+        }
+    }
     let abal = &tinv * &at;
-    let bbal = &tinv * &bm;
-    let cbal = &cm * &t;
+    // B_m has rows 2i + 1 = g_i; C_m has columns 2i = h_i
+    let tinv_odd = Mat::from_fn(n, nm, |i, k| tinv[(i, 2 * k + 1)]);
+    let bbal = &tinv_odd * &sys.g;
+    let t_even = Mat::from_fn(nm, n, |k, j| t[(2 * k, j)]);
+    let cbal = &sys.h * &t_even;
     let r = order;
     let n2 = n - r;
     let a11 = abal.as_ref().submatrix(0, 0, r, r);
@@ -283,6 +315,7 @@ pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) 
     let b2 = bbal.as_ref().submatrix(r, 0, n2, bbal.ncols());
     let c1 = cbal.as_ref().submatrix(0, 0, cbal.nrows(), r);
     let c2 = cbal.as_ref().submatrix(0, r, cbal.nrows(), n2);
+    lap("balanced_realisation", &mut laps);
     let lu = a22.partial_piv_lu();
     let mut x21 = a21.to_owned();
     lu.solve_in_place(x21.as_mut()); // A22^-1 A21
@@ -301,7 +334,8 @@ pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) 
     let resid = &g_full - &g_red;
     let dc_residual_rel = resid.norm_l2() / g_full.norm_l2();
     d = &d + &resid;
-    Ok(Reduced { a, b, c, d, hsv: sig, dc_residual_rel })
+    lap("matched_dc", &mut laps);
+    Ok(Reduced { a, b, c, d, hsv: sig, dc_residual_rel, timings: laps })
 }
 
 #[cfg(test)]

@@ -44,24 +44,13 @@ fn sym(a: &mut Mat<f64>) {
     }
 }
 
-/// A^T X for sparse A (r x c) and dense X (r x k): c x k.
 fn sparse_t_dense(a: &Csc, x: faer::MatRef<'_, f64>) -> Mat<f64> {
-    let mut out = Mat::<f64>::zeros(a.ncols, x.ncols());
-    for j in 0..x.ncols() {
-        let xj = x.col(j);
-        for c in 0..a.ncols {
-            let mut s = 0.0;
-            for p in a.col_ptr[c]..a.col_ptr[c + 1] {
-                s += a.val[p] * xj[a.row_idx[p]];
-            }
-            out[(c, j)] = s;
-        }
-    }
-    out
+    a.mul_t_dense(x)
 }
 
 impl CraigBampton {
     pub fn build(sys: &FullSystem, p: &StripParams) -> Result<CraigBampton> {
+        let mut t = std::time::Instant::now();
         let nf = sys.n_free();
         let mut boundary = Vec::new();
         let mut input_coord = Vec::new();
@@ -102,7 +91,6 @@ impl CraigBampton {
         let k_bb = sys.k_ff.submatrix(&bmap, nb, &boundary).to_dense();
         let m_bb = sys.m_ff.submatrix(&bmap, nb, &boundary).to_dense();
         let _span = tracing::debug_span!("cb", nb, ni).entered();
-        let mut t = std::time::Instant::now();
         let mut timings = Vec::new();
         let mut lap = |name: &str, timings: &mut Vec<(String, f64)>| {
             let now = std::time::Instant::now();
@@ -119,7 +107,7 @@ impl CraigBampton {
         lap("constraint_modes", &mut timings);
         crate::progress::stage("fixed-interface modes");
         let lmax = (2.0 * std::f64::consts::PI * p.cb_cutoff_hz).powi(2);
-        let modes = lowest_modes(&chol, &m_ii, Want::Below(lmax))?;
+        let modes = lowest_modes(&chol, &k_ii, &m_ii, Want::Below(lmax))?;
         let phi = modes.vectors;
         let nm = phi.ncols();
         lap("fixed_interface_modes", &mut timings);
@@ -129,12 +117,16 @@ impl CraigBampton {
         let mut k = Mat::<f64>::zeros(n, n);
         let kbs = &k_bb + sparse_t_dense(&k_ib, psi.as_ref());
         k.as_mut().submatrix_mut(0, 0, nb, nb).copy_from(&kbs);
-        for (j, &l) in modes.lambda.iter().enumerate() {
-            k[(nb + j, nb + j)] = l;
-        }
+        // Galerkin projection of K_ii on the Ritz vectors (diagonal up to their accuracy)
+        let kphi = k_ii.mul_dense(phi.as_ref());
+        let kkk = phi.transpose() * &kphi;
+        k.as_mut().submatrix_mut(nb, nb, nm, nm).copy_from(&kkk);
+        lap("k_reduced", &mut timings);
         let x = m_ii.mul_dense(psi.as_ref()); // M_ii Psi
+        lap("m_psi", &mut timings);
         let mibt_psi = sparse_t_dense(&m_ib, psi.as_ref()); // M_ib^T Psi
         let mbb = &m_bb + &mibt_psi + mibt_psi.transpose() + psi.transpose() * &x;
+        lap("m_bb", &mut timings);
         let mbk = sparse_t_dense(&m_ib, phi.as_ref()) + x.transpose() * &phi;
         let mphi = m_ii.mul_dense(phi.as_ref());
         let mkk = phi.transpose() * &mphi;

@@ -27,7 +27,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Lanczos on K^-1 M. `k_fact` factors K, `m` is M (same size).
-pub fn lowest_modes(k_fact: &Cholesky, m: &Csc, want: Want) -> Result<Modes> {
+pub fn lowest_modes(k_fact: &Cholesky, _k: &Csc, m: &Csc, want: Want) -> Result<Modes> {
     let n = m.nrows;
     let max_steps = n.min(match want {
         Want::Count(c) => 3 * c + 60,

@@ -162,7 +162,7 @@ impl StripModel {
             cb_boundary_dofs: cb.nb(),
             cb_modes: cb.nm(),
             cb_states: 2 * (cb.nb() + cb.nm()),
-            timings_s: tm.out.into_iter().chain(cb_sub).collect(),
+            timings_s: tm.out.into_iter().chain(cb_sub).chain(red.timings.iter().cloned()).collect(),
             code_version: crate::CODE_VERSION.to_string(),
             dc_residual_rel: red.dc_residual_rel,
         };

@@ -114,7 +114,7 @@ pub fn compare(model: &StripModel, art: &Artifacts) -> Result<Report> {
     let t0 = Instant::now();
     crate::progress::stage("full model: factorisation and eigenfrequencies");
     let kf = Cholesky::new(&sys.k_ff, "full model stiffness")?;
-    let full_modes = lowest_modes(&kf, &sys.m_ff, Want::Count(N_FREQ))?;
+    let full_modes = lowest_modes(&kf, &sys.k_ff, &sys.m_ff, Want::Count(N_FREQ))?;
     let freq_full_hz: Vec<f64> = full_modes.lambda.iter().map(|l| l.sqrt() / (2.0 * std::f64::consts::PI)).collect();
     timings.insert("report_full_eigen".into(), t0.elapsed().as_secs_f64());
 

@@ -73,22 +73,31 @@ impl Csc {
         }
     }
 
-    /// Y = A X for a dense column-major X (ncols x k), returned as nrows x k.
+    /// Y = A X for a dense X (ncols x k), returned as nrows x k.
     pub fn mul_dense(&self, x: faer::MatRef<'_, f64>) -> faer::Mat<f64> {
         let mut y = faer::Mat::<f64>::zeros(self.nrows, x.ncols());
-        for j in 0..x.ncols() {
-            let xj = x.col(j);
-            let yj = y.col_mut(j).try_as_col_major_mut().unwrap().as_slice_mut();
-            for c in 0..self.ncols {
-                let xc = xj[c];
-                if xc == 0.0 {
-                    continue;
-                }
-                for p in self.col_ptr[c]..self.col_ptr[c + 1] {
-                    yj[self.row_idx[p]] += self.val[p] * xc;
-                }
-            }
-        }
+        faer::sparse::linalg::matmul::sparse_dense_matmul(
+            y.as_mut(),
+            faer::Accum::Replace,
+            self.as_faer(),
+            x,
+            1.0,
+            faer::get_global_parallelism(),
+        );
+        y
+    }
+
+    /// Y = A^T X for a dense X (nrows x k), returned as ncols x k.
+    pub fn mul_t_dense(&self, x: faer::MatRef<'_, f64>) -> faer::Mat<f64> {
+        let mut y = faer::Mat::<f64>::zeros(self.ncols, x.ncols());
+        faer::sparse::linalg::matmul::sparse_dense_matmul(
+            y.as_mut(),
+            faer::Accum::Replace,
+            self.as_faer().transpose(),
+            x,
+            1.0,
+            faer::get_global_parallelism(),
+        );
         y
     }
 
