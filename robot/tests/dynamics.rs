@@ -207,7 +207,11 @@ fn rk4_step(robot: &Robot, q: &Vec6, qd: &Vec6, dt: f64) -> (Vec6, Vec6) {
 fn unforced_motion_conserves_energy() {
     // tau = 0 under gravity, no friction: kinetic + potential energy is constant. The arm
     // falls and swings for 0.5 s; RK4 at 0.1 ms.
-    for robot in [Robot::irb2400(), Robot::irb2400_with_tool(Tool::default()).with_armature(Vec6::from_element(0.05))] {
+    for robot in [
+        Robot::irb2400(),
+        Robot::irb2400_with_tool(Tool::default()).with_armature(Vec6::from_element(0.05)),
+        common::random_arm(7),
+    ] {
         let mut q = Vec6::new(0.3, -1.2, 0.4, 0.5, 0.8, -0.3);
         let mut qd = Vec6::new(0.5, -0.3, 0.4, 1.0, -1.5, 2.0);
         let energy = |q: &Vec6, qd: &Vec6| robot.kinetic_energy(q, qd) + robot.potential_energy(q);
@@ -222,7 +226,8 @@ fn unforced_motion_conserves_energy() {
         }
         // The arm must really have moved (energy exchanged), and the total must hold.
         assert!(max_kinetic > 100.0, "kinetic energy only reached {max_kinetic} J");
-        assert!(max_drift < 1e-9 * max_kinetic, "energy drift {max_drift:e} J of {max_kinetic} J kinetic");
+        // Observed: ~1e-14 of the peak kinetic energy (RK4's error at 0.1 ms is below round-off).
+        assert!(max_drift < 1e-11 * max_kinetic, "energy drift {max_drift:e} J of {max_kinetic} J kinetic");
     }
 }
 
