@@ -185,25 +185,11 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         }
         let q = Vec6::from(state.q);
         let qd = Vec6::from(state.qd);
-        if last_tick.is_none() {
+        let first = last_tick.is_none();
+        if first {
             // First state: start the references from here (a take-over of a running plant starts
-            // its own run) and report the design.
+            // its own run). The design report is logged after this tick's answer is out.
             reference.reset(state.sim_time_s);
-            let mut g = *law.gains();
-            g.force.effective_mass_kg = effective_normal_mass(&law, &q);
-            g.force.contact_resonance_hz =
-                (g.force.strip_stiffness_n_per_m / g.force.effective_mass_kg).sqrt() / std::f64::consts::TAU;
-            law = ControlLaw::new(law.robot().clone(), *law.task(), g, tool_down_rotation());
-            tracing::info!(
-                tick = state.tick,
-                k_s = g.force.strip_stiffness_n_per_m,
-                m_d = g.force.m_d_kg,
-                b_d = g.force.b_d_nspm,
-                k_i = g.force.k_i_per_s,
-                m_eff = g.force.effective_mass_kg,
-                predicted_pm_deg = g.force.predicted_phase_margin_deg,
-                "first state; force gains from the design rule"
-            );
         }
         let (tau, diag) = step(&mut law, &mut reference, &state, &wrench, &q, &qd, cfg.contract_version);
         let mut diag = diag;
@@ -222,6 +208,21 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         summary.last_tick = state.tick;
         summary.max_compute_ns = summary.max_compute_ns.max(compute_ns);
         compute_sum_ns += u128::from(compute_ns);
+        if first {
+            let f = &law.gains().force;
+            let m_eff = effective_normal_mass(&law, &q);
+            tracing::info!(
+                tick = state.tick,
+                k_s = f.strip_stiffness_n_per_m,
+                m_d = f.m_d_kg,
+                b_d = f.b_d_nspm,
+                k_i = f.k_i_per_s,
+                m_eff,
+                contact_resonance_hz = (f.strip_stiffness_n_per_m / m_eff).sqrt() / std::f64::consts::TAU,
+                predicted_pm_deg = f.predicted_phase_margin_deg,
+                "first state answered; force gains from the design rule (controller::gains)"
+            );
+        }
     }
 }
 
