@@ -214,8 +214,8 @@ fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
         let dz = (rec.strip[i].wheel_z_m - rec.strip[i - 1].wheel_z_m).abs();
         rolled += dz;
         match interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m) {
-            // Compressive pressure; its sign convention is the strip model's, so judge |p|.
-            Some(p) if p.abs() >= BOND_PRESSURE_PA => pressed += dz,
+            // Compression is positive (the plant's convention); tension never bonds.
+            Some(p) if p >= BOND_PRESSURE_PA => pressed += dz,
             Some(_) => {}
             None => have_pressure = false,
         }
