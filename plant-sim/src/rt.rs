@@ -12,15 +12,18 @@ pub struct RtSetup {
 }
 
 /// Prepare the calling thread: timer slack 1 ns (so absolute sleeps wake on time instead of up to
-/// 50 µs late), SCHED_FIFO at `priority` and locked memory when the process may (CAP_SYS_NICE /
-/// rtprio limits, CAP_IPC_LOCK / memlock limits). Failures are reported, not fatal.
-pub fn setup_thread(priority: i32) -> RtSetup {
+/// 50 µs late), SCHED_FIFO at `priority` (None = keep the normal policy) and locked memory when
+/// the process may (CAP_SYS_NICE / rtprio limits, CAP_IPC_LOCK / memlock limits). Failures are
+/// reported, not fatal.
+pub fn setup_thread(priority: Option<i32>) -> RtSetup {
     let mut r = RtSetup::default();
     // SAFETY: plain syscalls on the calling thread/process with valid arguments.
     unsafe {
         r.timer_slack_1ns = libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) == 0;
-        let param = libc::sched_param { sched_priority: priority };
-        r.sched_fifo = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) == 0;
+        if let Some(priority) = priority {
+            let param = libc::sched_param { sched_priority: priority };
+            r.sched_fifo = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) == 0;
+        }
         r.mlockall = libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0;
     }
     r
