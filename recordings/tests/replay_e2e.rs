@@ -81,12 +81,12 @@ fn wait(mut c: Child, limit: Duration) -> std::process::ExitStatus {
     }
 }
 
-/// A lockstep recording of `ticks` ms with the hold controller.
-fn record_lockstep(plant: &Path, hold: &Path, name: &str, seconds: f64) -> PathBuf {
+/// A lockstep recording of `seconds` with the given controller.
+fn record_lockstep(plant: &Path, controller: &Path, name: &str, seconds: f64) -> PathBuf {
     let out = tmp(name);
     let rig = format!("e2e-{}-{name}", std::process::id()).replace(".mcap", "");
     let p = start_plant(plant, &rig, "lockstep", seconds, &out);
-    let c = start_controller(hold, &rig, &[]);
+    let c = start_controller(controller, &rig, &[]);
     assert!(wait(p, Duration::from_secs(120)).success(), "plant-sim failed");
     let _ = wait(c, Duration::from_secs(10));
     out
@@ -164,4 +164,33 @@ fn a_killed_and_an_interrupted_plant_leave_readable_files() {
             assert!(rec.summary_metadata("ticks_written").is_some());
         }
     }
+}
+
+#[test]
+fn replay_into_the_force_controller_reproduces_its_torques() {
+    let Some((plant, _)) = binaries() else { return };
+    let controller = bin_dir().join("controller");
+    if !controller.is_file() {
+        println!("SKIP: {} not built (cargo build --release -p controller)", controller.display());
+        return;
+    }
+    let file = record_lockstep(&plant, &controller, "force.mcap", 1.5);
+    let rec = Recording::open_complete(&file).unwrap();
+    rec.check_continuity().unwrap();
+    let out = recordings::replay::run(&ReplayArgs {
+        file: file.clone(),
+        speed: None,
+        controller: Some(controller),
+        scenario: None,
+        rig: None,
+        watchdog: 2.0,
+        json: Some(tmp("force-replay.json")),
+        allow_truncated: false,
+    })
+    .unwrap();
+    let c = out.comparison.unwrap();
+    assert_eq!(c.ticks_compared + c.ticks_blending + c.ticks_held + c.ticks_unanswered, rec.joint_state.len());
+    assert!(c.ticks_compared >= 1000 && c.identical, "{c:?}");
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(tmp("force-replay.json")).unwrap()).unwrap();
+    assert_eq!(json["comparison"]["identical"], true);
 }
