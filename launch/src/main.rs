@@ -149,6 +149,10 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
     match &outcome.plant_summary {
         Some(v) => {
             if timing {
+                // The targets hold on an otherwise idle machine: say how idle it was.
+                let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+                let cpus = std::thread::available_parallelism().map_or(0, |n| n.get());
+                println!("host: {cpus} CPUs, load average (1/5/15 min) {}", load.split_whitespace().take(3).collect::<Vec<_>>().join(" "));
                 print!("{}", summary::timing_report(v));
             }
             print!("{}", summary::run_summary(v));
