@@ -59,8 +59,13 @@ impl Recording {
     /// Reads a recording; a truncated file yields its complete chunks and sets `truncated`.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, ReadError> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| ReadError::Io { path: path.into(), source })?;
-        Self::from_bytes(path, &bytes)
+        let io = |source| ReadError::Io { path: path.into(), source };
+        let file = std::fs::File::open(path).map_err(io)?;
+        if !file.metadata().map_err(io)?.is_file() {
+            return Err(io(std::io::Error::other("not a regular file")));
+        }
+        let map = Mapped::new(&file).map_err(io)?;
+        Self::from_bytes(path, map.bytes())
     }
 
     /// Like [`open`](Self::open) but a truncated file is an error.
@@ -248,4 +253,44 @@ fn check_schema(path: &Path, ch: &mcap::Channel, idx: usize) -> Result<(), ReadE
         });
     }
     Ok(())
+}
+
+/// A read-only memory map of a whole file (long recordings are not copied into memory).
+struct Mapped {
+    ptr: *mut libc::c_void,
+    len: usize,
+}
+
+impl Mapped {
+    fn new(file: &std::fs::File) -> std::io::Result<Self> {
+        use std::os::fd::AsRawFd;
+        let len = file.metadata()?.len() as usize;
+        if len == 0 {
+            return Ok(Self { ptr: std::ptr::null_mut(), len: 0 });
+        }
+        // SAFETY: a private read-only mapping of an open file; unmapped in Drop.
+        let ptr = unsafe { libc::mmap(std::ptr::null_mut(), len, libc::PROT_READ, libc::MAP_PRIVATE, file.as_raw_fd(), 0) };
+        if ptr == libc::MAP_FAILED {
+            return Err(std::io::Error::last_os_error());
+        }
+        Ok(Self { ptr, len })
+    }
+
+    fn bytes(&self) -> &[u8] {
+        if self.len == 0 {
+            return &[];
+        }
+        // SAFETY: ptr maps len readable bytes for the lifetime of self. A recording is not
+        // rewritten in place (the writer only appends), so the bytes do not change under us.
+        unsafe { std::slice::from_raw_parts(self.ptr as *const u8, self.len) }
+    }
+}
+
+impl Drop for Mapped {
+    fn drop(&mut self) {
+        if self.len > 0 {
+            // SAFETY: ptr/len come from a successful mmap.
+            unsafe { libc::munmap(self.ptr, self.len) };
+        }
+    }
 }

@@ -102,6 +102,8 @@ fn a_non_mcap_file_is_refused_by_name() {
     let empty = tmp("empty.mcap");
     std::fs::write(&empty, b"").unwrap();
     assert!(matches!(Recording::open(&empty), Err(ReadError::NotMcap { .. })));
+    let msg = Recording::open(std::env::temp_dir()).unwrap_err().to_string();
+    assert!(msg.contains("not a regular file"), "{msg}");
     let missing = tmp("does-not-exist.mcap");
     let msg = Recording::open(&missing).unwrap_err().to_string();
     assert!(msg.contains("does-not-exist.mcap"), "{msg}");
