@@ -30,7 +30,28 @@ pub struct StripStepper {
     wheel_cz: Vec<c64>,
     wheel_step_d: f64,
     wheel_d_bottom: Vec<f64>,
+    /// Centre-line bottom output rows (indices into the bottom outputs).
+    centre: Vec<usize>,
+    table: WheelTable,
 }
+
+/// Wheel quantities tabulated over the wheel position z_a (uniform grid) for O(modes)
+/// cubic interpolation in [`StripStepper::set_wheel_z`]. Entry g holds, for the Gaussian weights
+/// w(z_g): B_d w (modes), w^T C_top (modes), w^T D_top w, w^T (C_top B_d + D_top) w and the
+/// centre-line bottom feed-through D_centre w.
+struct WheelTable {
+    z0: f64,
+    dz: f64,
+    n: usize,
+    b: Vec<c64>,
+    c: Vec<c64>,
+    d: Vec<f64>,
+    step_d: Vec<f64>,
+    d_centre: Vec<f64>,
+}
+
+/// Grid points per element length along z of the wheel table.
+const TABLE_PER_ELEMENT: usize = 8;
 
 impl StripStepper {
     /// Discretises `model` for step `dt` (s), state at rest (zero).
@@ -48,7 +69,9 @@ impl StripStepper {
                 bz[j * modes + k] = gamma[k] * mf.b[j * modes + k];
             }
         }
-        let d = (0..p).flat_map(|i| (0..m).map(move |j| (i, j))).map(|(i, j)| model.d[(i, j)]).collect();
+        let d: Vec<f64> = (0..p).flat_map(|i| (0..m).map(move |j| (i, j))).map(|(i, j)| model.d[(i, j)]).collect();
+        let centre = model.centre_bottom.clone();
+        let table = WheelTable::build(model, &z, &bz, &mf.c, &d, &centre);
         StripStepper {
             dt,
             modes,
@@ -64,7 +87,9 @@ impl StripStepper {
             wheel_d: 0.0,
             wheel_cz: vec![c64::new(0.0, 0.0); modes],
             wheel_step_d: 0.0,
-            wheel_d_bottom: vec![0.0; p - m],
+            wheel_d_bottom: vec![0.0; centre.len()],
+            centre,
+            table,
         }
     }
 
@@ -132,9 +157,53 @@ impl StripStepper {
         y
     }
 
-    /// Caches the wheel direction: weights `w` (from `gaussian_weights`, sum 1). Afterwards the
-    /// input is u = f_y w and the scalar helpers below cost O(modes). Costs O(nonzeros x modes
-    /// + outputs); call it when the wheel position changes (allocation-free).
+    /// Sets the wheel direction to the Gaussian map (5.33)-(5.34) at z_a (m) from the table
+    /// built at construction: cubic interpolation, O(modes), about a microsecond, so it can run
+    /// every substep (relative deviation from the exact `set_wheel(gaussian_weights(z_a))` is
+    /// below 1e-5; tested). z_a is clamped to the strip.
+    pub fn set_wheel_z(&mut self, z_a_m: f64) {
+        let t = &self.table;
+        let s = ((z_a_m - t.z0) / t.dz).clamp(0.0, (t.n - 1) as f64);
+        let i = (s.floor() as usize).clamp(1, t.n.saturating_sub(3).max(1));
+        let x = s - i as f64; // in [-1, 2] near the ends, [0, 1] inside
+        // cubic Lagrange weights on nodes i-1, i, i+1, i+2
+        let l = [
+            -x * (x - 1.0) * (x - 2.0) / 6.0,
+            (x + 1.0) * (x - 1.0) * (x - 2.0) / 2.0,
+            -(x + 1.0) * x * (x - 2.0) / 2.0,
+            (x + 1.0) * x * (x - 1.0) / 6.0,
+        ];
+        let md = self.modes;
+        for k in 0..md {
+            let mut b = c64::new(0.0, 0.0);
+            let mut c = c64::new(0.0, 0.0);
+            for (q, &lq) in l.iter().enumerate() {
+                let g = i - 1 + q;
+                b += t.b[g * md + k] * lq;
+                c += t.c[g * md + k] * lq;
+            }
+            self.wheel_b[k] = b;
+            self.wheel_c[k] = c;
+            self.wheel_cz[k] = c * self.z[k];
+        }
+        let nc = self.centre.len();
+        self.wheel_d = 0.0;
+        self.wheel_step_d = 0.0;
+        self.wheel_d_bottom.iter_mut().for_each(|v| *v = 0.0);
+        for (q, &lq) in l.iter().enumerate() {
+            let g = i - 1 + q;
+            self.wheel_d += t.d[g] * lq;
+            self.wheel_step_d += t.step_d[g] * lq;
+            for r in 0..nc {
+                self.wheel_d_bottom[r] += t.d_centre[g * nc + r] * lq;
+            }
+        }
+    }
+
+    /// Caches the wheel direction for arbitrary weights `w` (e.g. from `gaussian_weights`, sum
+    /// 1). Afterwards the input is u = f_y w and the scalar helpers below cost O(modes). Costs
+    /// O(nonzeros x (modes + n_top)), a few hundred microseconds: prefer `set_wheel_z` per
+    /// substep. Allocation-free.
     pub fn set_wheel(&mut self, w: &[f64]) {
         assert_eq!(w.len(), self.n_top);
         self.wheel_b.iter_mut().for_each(|v| *v = c64::new(0.0, 0.0));
@@ -156,9 +225,11 @@ impl StripStepper {
                 acc.im += c.im * wj;
             }
             for (i, &wi) in w.iter().enumerate() {
-                dww += wi * self.d[i * self.n_top + j] * wj;
+                if wi != 0.0 {
+                    dww += wi * self.d[i * self.n_top + j] * wj;
+                }
             }
-            for (r, acc) in self.wheel_d_bottom.iter_mut().enumerate() {
+            for (acc, &r) in self.wheel_d_bottom.iter_mut().zip(&self.centre) {
                 *acc += self.d[(self.n_top + r) * self.n_top + j] * wj;
             }
         }
@@ -209,10 +280,63 @@ impl StripStepper {
         }
     }
 
-    /// Bottom reaction of bottom node `i` (N, +y) under the wheel load f_y (after `set_wheel`).
-    pub fn wheel_bottom_reaction(&self, i: usize, f_y: f64) -> f64 {
-        let r = self.n_top + i;
-        let row = &self.c[r * self.modes..(r + 1) * self.modes];
-        row.iter().zip(&self.xi).map(|(c, x)| c.re * x.re - c.im * x.im).sum::<f64>() + self.wheel_d_bottom[i] * f_y
+    /// Centre-line bottom reactions (N, +y on the strip; order of `StripModel::centre_line`)
+    /// under the wheel load f_y (after `set_wheel*`). O(centre nodes x modes). Divide by the
+    /// tributary areas for the contact pressure; add the bulge offsets.
+    pub fn wheel_centre_reactions(&self, f_y: f64, out: &mut [f64]) {
+        assert_eq!(out.len(), self.centre.len());
+        for (k, (&r, o)) in self.centre.iter().zip(out.iter_mut()).enumerate() {
+            let row = self.n_top + r;
+            let crow = &self.c[row * self.modes..(row + 1) * self.modes];
+            *o = crow.iter().zip(&self.xi).map(|(c, x)| c.re * x.re - c.im * x.im).sum::<f64>() + self.wheel_d_bottom[k] * f_y;
+        }
+    }
+}
+
+impl WheelTable {
+    fn build(model: &StripModel, z: &[c64], bz: &[c64], c: &[c64], d: &[f64], centre: &[usize]) -> WheelTable {
+        let layers = model.top_xyz_m.iter().map(|p| p[2]).fold(0.0f64, f64::max);
+        let m = model.n_top();
+        let modes = z.len();
+        let n_layers = model.top_xyz_m.iter().filter(|p| p[0].abs() < 1e-12).count().max(2);
+        let dz = layers / ((n_layers - 1) * TABLE_PER_ELEMENT) as f64;
+        let n = (layers / dz).round() as usize + 1;
+        let mut tb = vec![c64::new(0.0, 0.0); n * modes];
+        let mut tc = vec![c64::new(0.0, 0.0); n * modes];
+        let mut td = vec![0.0; n];
+        let mut tsd = vec![0.0; n];
+        let nc = centre.len();
+        let mut tdc = vec![0.0; n * nc];
+        let mut w = vec![0.0; m];
+        let mut dw = vec![0.0; m];
+        for g in 0..n {
+            model.gaussian_weights(g as f64 * dz, &mut w);
+            let (bg, cg) = (&mut tb[g * modes..(g + 1) * modes], &mut tc[g * modes..(g + 1) * modes]);
+            for (j, &wj) in w.iter().enumerate() {
+                if wj < 1e-14 {
+                    continue;
+                }
+                for k in 0..modes {
+                    bg[k] += bz[j * modes + k] * wj;
+                    cg[k] += c[j * modes + k] * wj;
+                }
+            }
+            dw.iter_mut().for_each(|v| *v = 0.0);
+            for (j, &wj) in w.iter().enumerate() {
+                if wj < 1e-14 {
+                    continue;
+                }
+                for i in 0..m {
+                    dw[i] += d[i * m + j] * wj;
+                }
+                for (r, &cr) in centre.iter().enumerate() {
+                    tdc[g * nc + r] += d[(m + cr) * m + j] * wj;
+                }
+            }
+            td[g] = w.iter().zip(&dw).map(|(a, b)| a * b).sum();
+            let cb: f64 = cg.iter().zip(bg.iter()).map(|(c, b)| c.re * b.re - c.im * b.im).sum();
+            tsd[g] = td[g] + cb;
+        }
+        WheelTable { z0: 0.0, dz, n, b: tb, c: tc, d: td, step_d: tsd, d_centre: tdc }
     }
 }

@@ -188,3 +188,31 @@ fn gaussian_weights_and_bulge() {
     let smax = model.bulge_bottom_reaction_n.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     assert!(s.abs() < 1e-9 * smax, "bulge reactions sum {s}");
 }
+
+#[test]
+fn tabulated_wheel_matches_exact_weights() {
+    let model = StripModel::build(&params_2mm()).unwrap();
+    let mut w = vec![0.0; model.n_top()];
+    let mut exact = StripStepper::new(&model, 1e-4);
+    let mut table = StripStepper::new(&model, 1e-4);
+    let nc = model.centre_line().count();
+    let (mut r1, mut r2) = (vec![0.0; nc], vec![0.0; nc]);
+    for (k, &za) in [0.0, 0.7e-3, 3.3e-3, 17.77e-3, 20.0e-3, 31.4e-3, 39.9e-3, 40e-3].iter().enumerate() {
+        model.gaussian_weights(za, &mut w);
+        exact.set_wheel(&w);
+        table.set_wheel_z(za);
+        for _ in 0..(5 + 7 * k) {
+            exact.step_wheel(-10.0);
+            table.step_wheel(-10.0);
+        }
+        let (a, b) = (exact.wheel_uy_free(), table.wheel_uy_free());
+        assert!((a - b).abs() < 1e-5 * a.abs(), "z_a {za}: state part {a} vs {b}");
+        let (a, b) = (exact.wheel_step_compliance(), table.wheel_step_compliance());
+        assert!((a - b).abs() < 1e-5 * a.abs(), "z_a {za}: step compliance {a} vs {b}");
+        let (a, b) = (exact.wheel_compliance(), table.wheel_compliance());
+        assert!((a - b).abs() < 1e-5 * exact.wheel_step_compliance().abs(), "z_a {za}: feed-through {a} vs {b}");
+        exact.wheel_centre_reactions(-10.0, &mut r1);
+        table.wheel_centre_reactions(-10.0, &mut r2);
+        assert!(rel(&r2, &r1) < 1e-5, "z_a {za}: centre reactions {:e}", rel(&r2, &r1));
+    }
+}
