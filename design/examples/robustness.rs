@@ -34,13 +34,15 @@ fn main() -> anyhow::Result<()> {
         s.loop_.substeps = 20;
         cases.push((format!("{tag} substeps 20 (vs 10)"), s));
     }
-    println!("| case | max error (N) | RMS error (N) |\n|---|---|---|");
+    println!("| case | max error (N) | RMS error (N) | weakest bond z in [4, 36] mm |\n|---|---|---|---|");
     for (name, s) in cases {
         if only.as_ref().is_some_and(|o| !name.contains(o.as_str())) {
             continue;
         }
-        let t = design::servo::tracking(&design::servo::run_servo(&s, cache, 0.0)?);
-        println!("| {name} | {:.4} | {:.4} |", t.max_n, t.rms_n);
+        let run = design::servo::run_servo_full(&s, cache, 0.0)?;
+        let t = design::servo::tracking(&run.samples);
+        let (zb, pb) = run.weakest_bond(4e-3, 36e-3).unwrap_or((f64::NAN, f64::NAN));
+        println!("| {name} | {:.4} | {:.4} | {:.0} kPa at {:.0} mm |", t.max_n, t.rms_n, pb / 1e3, zb * 1e3);
     }
     Ok(())
 }

@@ -179,6 +179,23 @@ pub fn design(s: &Scenario, model: &StripModel, z_a_m: f64, out: &Path) -> anyho
         },
         &out.join("servo_1dof"),
     )?);
+    figures.extend(save_lines(
+        &LinePlot {
+            title: "1-DOF servo run: force error over the roll, |F_bottom| - |F_ref|".into(),
+            x_label: "time (s)".into(),
+            y_label: "force error (N)".into(),
+            series: vec![Series {
+                label: "|bottom force| - |reference|".into(),
+                points: samples
+                    .iter()
+                    .filter(|x| x.phase == controller::reference::Phase::Roll)
+                    .map(|x| (x.t_s, x.bottom_force_n.abs() - x.force_ref_n.abs()))
+                    .collect(),
+            }],
+            hlines: vec![(0.0, "0".into())],
+        },
+        &out.join("servo_1dof_error"),
+    )?);
     let result = DesignResult {
         z_a_mm: z_a_m * 1e3,
         strip_static_stiffness_n_per_m: k_s,

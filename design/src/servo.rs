@@ -12,7 +12,6 @@ use controller::reference::{Phase, ReferenceGenerator, ReferenceParams};
 use messages::{JointState, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
 use plant_sim::physics::Physics;
 use recordings::{StripRecord, MAX_CENTRELINE};
-use robot::Vec6;
 use scenario::Scenario;
 
 /// One recorded sample of the servo run (per tick).
@@ -52,9 +51,35 @@ pub fn tracking(samples: &[ServoSample]) -> Tracking {
     }
 }
 
+/// A whole in-process run: per-tick samples plus, per centre-line node, the largest bottom
+/// pressure it saw (the bond check of issue 6).
+#[derive(Clone, Debug, Default)]
+pub struct ServoRun {
+    pub samples: Vec<ServoSample>,
+    pub centreline_z_m: Vec<f64>,
+    pub peak_pressure_pa: Vec<f64>,
+}
+
+impl ServoRun {
+    /// Lowest peak pressure over the nodes with z in [z_from, z_to]: (z, Pa).
+    pub fn weakest_bond(&self, z_from_m: f64, z_to_m: f64) -> Option<(f64, f64)> {
+        self.centreline_z_m
+            .iter()
+            .zip(&self.peak_pressure_pa)
+            .filter(|(z, _)| **z >= z_from_m - 1e-9 && **z <= z_to_m + 1e-9)
+            .map(|(z, p)| (*z, *p))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    }
+}
+
 /// Run the scenario's servo run in-process for `duration_s` (0 = until the reference is done
 /// plus 0.1 s). `cache_dir`: the strip model cache.
 pub fn run_servo(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow::Result<Vec<ServoSample>> {
+    Ok(run_servo_full(s, cache_dir, duration_s)?.samples)
+}
+
+/// [`run_servo`] with the bond data.
+pub fn run_servo_full(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow::Result<ServoRun> {
     let mut physics = Physics::new(s, cache_dir)?;
     let task = TaskFrame::from_scenario(s);
     let mut law = ControlLaw::new(controller_robot(s), task, Gains::from_scenario(s, f64::NAN), tool_down_rotation());
@@ -72,6 +97,8 @@ pub fn run_servo(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow::Res
     };
     let max_ticks = if duration_s > 0.0 { (duration_s / period).round() as u64 } else { (60.0 / period) as u64 };
     let mut done_at: Option<u64> = None;
+    let centreline_z_m: Vec<f64> = physics.contact().map_or(Vec::new(), |c| c.centreline_z_m().to_vec());
+    let mut peak = vec![f64::NEG_INFINITY; centreline_z_m.len()];
     for tick in 0..max_ticks {
         let (q, qd) = (physics.q(), physics.qd());
         let state = JointState {
@@ -91,6 +118,9 @@ pub fn run_servo(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow::Res
         let wrench = Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick, force, torque };
         let (tau, diag) = controller::daemon::step(&mut law, &mut reference, &state, &wrench, &q, &qd, CONTRACT_VERSION);
         physics.fill_strip_record(&mut rec);
+        for (p, &x) in peak.iter_mut().zip(&rec.centreline_pressure_pa[..rec.n_centreline as usize]) {
+            *p = p.max(x);
+        }
         out.push(ServoSample {
             t_s: state.sim_time_s,
             phase: reference.phase(),
@@ -110,6 +140,5 @@ pub fn run_servo(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow::Res
             }
         }
     }
-    let _ = Vec6::zeros();
-    Ok(out)
+    Ok(ServoRun { samples: out, centreline_z_m, peak_pressure_pa: peak })
 }
