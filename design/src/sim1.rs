@@ -25,7 +25,6 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
     let mut contact = StripContact::new(model, geo, h);
     let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
     let rot: Matrix3<f64> = controller::model::tool_down_rotation();
-    let r_w = geo.wheel_radius_m;
     // Wheel centre (TCP) in the task frame: z along the strip, y up.
     let start = reference.params().start_task_m;
     let (mut y, mut vy, mut z) = (start.y, 0.0, start.z);
@@ -62,7 +61,6 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
             vy += acc * h;
         }
         z = r.pos_m.z + r.vel_mps.z * period + 0.5 * r.acc_mps2.z * period * period;
-        let _ = r_w;
         if r.phase == Phase::Done {
             done_ticks += 1;
             if done_ticks > (0.1 / period) as u64 {
@@ -71,4 +69,34 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use strip::StripParams;
+
+    /// On a flat strip (no bulge) the impedance law (6.4) settles on the reference: at the end of
+    /// the dwell the bottom force equals F_r (static equilibrium, no integral action needed), and
+    /// the run goes through every phase to the lift-off.
+    #[test]
+    fn flat_strip_settles_on_the_reference_and_lifts_off() {
+        let p = StripParams { length_m: 0.02, element_m: 0.002, order: 40, bulge_amplitude_m: 0.0, bulge_width_m: 0.01, bulge_center_m: 0.01, ..StripParams::default() };
+        let model = StripModel::load_or_build(&p).unwrap();
+        let mut s = Scenario::default();
+        s.strip.length_mm = 20.0;
+        s.trajectory.z_end_mm = 18.0;
+        s.trajectory.dwell_s = 0.5;
+        s.controller.force_integral = false;
+        s.controller.strip_stiffness_n_per_m = 1.0 / crate::plant1::StripPoint::new(&model, 0.01).compliance(nalgebra::Complex::new(0.0, 0.0)).re;
+        let gains = Gains::from_scenario(&s, 20.0);
+        let out = run_1dof(&s, &model, &gains, 20.0);
+        let last_dwell = out.iter().filter(|x| x.phase == Phase::Dwell).last().expect("dwell phase");
+        assert!((last_dwell.bottom_force_n - s.trajectory.force_ref_n).abs() < 2e-3, "{last_dwell:?}");
+        assert!((last_dwell.contact_force_n - last_dwell.bottom_force_n).abs() < 1e-3);
+        let last = out.last().unwrap();
+        assert_eq!(last.phase, Phase::Done);
+        assert_eq!(last.contact_force_n, 0.0, "the wheel lifted off");
+        assert!((last.wheel_z_m - 0.018).abs() < 1e-6, "{}", last.wheel_z_m);
+    }
 }
