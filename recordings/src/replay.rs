@@ -39,6 +39,11 @@ pub struct TorqueComparison {
 
 /// Compares `answers[i]` (the replayed controller's torque for tick row i) with the recording.
 /// `blend_ticks`: fresh ticks the plant blends over after a (re)connection.
+///
+/// Where the plant recorded the controller's own answer (`tau_commanded`) that is the reference on
+/// every tick. Otherwise the applied torque is, on the ticks where it equals the answer: not held,
+/// and not within the blend-in after the gate left WaitingForController / SafeStop or saw a new
+/// controller id (the status the gate decided from is the one published for that tick).
 pub fn compare_torques(rec: &Recording, answers: &[Option<[f64; DOF]>], blend_ticks: u32) -> TorqueComparison {
     let mut c = TorqueComparison {
         ticks_compared: 0,
@@ -56,34 +61,25 @@ pub fn compare_torques(rec: &Recording, answers: &[Option<[f64; DOF]>], blend_ti
     let mut blend_left = 0;
     let mut sq = [0.0; DOF];
     for (i, row) in rec.joint_torque.iter().enumerate() {
+        let answer = answers.get(i).copied().flatten();
         if row.held {
-            c.ticks_held += 1;
+            match row.commanded {
+                Some(cmd) => accumulate(&mut c, &mut sq, row.tick, answer, &cmd),
+                None => c.ticks_held += 1,
+            }
             continue;
         }
-        // The plant's gate blends when it leaves WaitingForController / SafeStop or sees a new
-        // controller id; the status it decided from is the one published for this tick.
         let status = rec.joint_state.get(i).map_or(0, |s| s.plant_status);
         if status == waiting || status == safe || last_id != Some(row.torque.controller_id) {
             blend_left = blend_ticks;
         }
         last_id = Some(row.torque.controller_id);
-        if blend_left > 0 {
-            blend_left -= 1;
-            c.ticks_blending += 1;
-            continue;
-        }
-        let Some(Some(tau)) = answers.get(i) else {
-            c.ticks_unanswered += 1;
-            continue;
-        };
-        c.ticks_compared += 1;
-        for (j, (a, b)) in tau.iter().zip(&row.torque.tau).enumerate() {
-            if a.to_bits() != b.to_bits() {
-                c.identical = false;
-                c.first_difference_tick.get_or_insert(row.tick);
-            }
-            c.max_abs_nm[j] = c.max_abs_nm[j].max((a - b).abs());
-            sq[j] += (a - b) * (a - b);
+        let blending = blend_left > 0;
+        blend_left = blend_left.saturating_sub(1);
+        match row.commanded {
+            Some(cmd) => accumulate(&mut c, &mut sq, row.tick, answer, &cmd),
+            None if blending => c.ticks_blending += 1,
+            None => accumulate(&mut c, &mut sq, row.tick, answer, &row.torque.tau),
         }
     }
     if c.ticks_compared > 0 {
@@ -94,6 +90,22 @@ pub fn compare_torques(rec: &Recording, answers: &[Option<[f64; DOF]>], blend_ti
         c.identical = false;
     }
     c
+}
+
+fn accumulate(c: &mut TorqueComparison, sq: &mut [f64; DOF], tick: u64, answer: Option<[f64; DOF]>, recorded: &[f64; DOF]) {
+    let Some(tau) = answer else {
+        c.ticks_unanswered += 1;
+        return;
+    };
+    c.ticks_compared += 1;
+    for (j, (a, b)) in tau.iter().zip(recorded).enumerate() {
+        if a.to_bits() != b.to_bits() {
+            c.identical = false;
+            c.first_difference_tick.get_or_insert(tick);
+        }
+        c.max_abs_nm[j] = c.max_abs_nm[j].max((a - b).abs());
+        sq[j] += (a - b) * (a - b);
+    }
 }
 
 /// What a replay did.
@@ -389,7 +401,7 @@ mod tests {
             t.tick = k as u64;
             t.controller_id = ids[k];
             t.tau = [k as f64; DOF];
-            rec.joint_torque.push(TorqueRow { tick: k as u64, torque: t, held: held[k] });
+            rec.joint_torque.push(TorqueRow { tick: k as u64, torque: t, held: held[k], commanded: None });
         }
         rec
     }
@@ -417,5 +429,18 @@ mod tests {
         assert!(!c.identical && c.first_difference_tick == Some(3));
         assert!((c.max_abs_nm[0] - 0.3).abs() < 1e-12);
         assert!((c.rms_nm[5] - (0.3f64 * 0.3 / 2.0).sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_recorded_answer_is_compared_on_every_tick_held_or_blending() {
+        let (w, r) = (PlantStatus::WaitingForController as u32, PlantStatus::Running as u32);
+        let mut rec = recording(&[false, false, true, false], &[1, 1, 1, 1], &[w, r, r, r]);
+        for (k, row) in rec.joint_torque.iter_mut().enumerate() {
+            row.commanded = Some([10.0 + k as f64; DOF]); // the answers, unlike the applied tau
+        }
+        let answers: Vec<_> = (0..4).map(|k| Some([10.0 + k as f64; DOF])).collect();
+        let c = compare_torques(&rec, &answers, 2);
+        assert_eq!((c.ticks_compared, c.ticks_held, c.ticks_blending), (4, 0, 0));
+        assert!(c.identical);
     }
 }

@@ -63,6 +63,8 @@ float64[6] tau              # N m, as applied
 bool held                   # true if held from an earlier tick (late, missing or refused answer)
 uint32 controller_status    # CONTROLLER_*
 uint64 controller_id        # identifies the controller process that computed it
+bool has_commanded          # the plant recorded the controller's own answer for this tick
+float64[6] tau_commanded    # N m, that answer as received (before hold, refusal or blend-in)
 ",
 };
 
@@ -175,6 +177,9 @@ pub struct TickHead {
     pub wrench: Wrench,
     pub torque: JointTorque,
     pub torque_held: bool,
+    /// The controller's own answer for this tick, if the plant passed it
+    /// ([`crate::Recorder::record_tick_commanded`]).
+    pub commanded: Option<[f64; messages::DOF]>,
     pub diag: ControllerDiagnostics,
     pub has_diag: bool,
     pub strip: StripHead,
@@ -201,6 +206,7 @@ impl TickHead {
             wrench: r.wrench,
             torque: r.torque,
             torque_held: r.torque_held,
+            commanded: None,
             diag: r.diag,
             has_diag: r.has_diag,
             strip: StripHead {
@@ -239,6 +245,8 @@ pub fn encode_joint_torque(buf: &mut Vec<u8>, r: &TickHead) {
     w.bool(r.torque_held);
     w.u32(r.torque.controller_status);
     w.u64(r.torque.controller_id);
+    w.bool(r.commanded.is_some());
+    w.f64_array(&r.commanded.unwrap_or([0.0; messages::DOF]));
 }
 
 pub fn encode_wrench(buf: &mut Vec<u8>, r: &TickHead) {
@@ -314,6 +322,8 @@ pub struct TorqueRow {
     /// The applied torque; `torque.tick` is the tick it answered.
     pub torque: JointTorque,
     pub held: bool,
+    /// The controller's own answer for this tick, when the plant recorded it.
+    pub commanded: Option<[f64; messages::DOF]>,
 }
 
 /// A `/strip` message.
@@ -377,10 +387,13 @@ pub fn decode_joint_torque(msg: &[u8]) -> Result<TorqueRow, CdrError> {
     let held = r.bool("held")?;
     let controller_status = r.u32("controller_status")?;
     let controller_id = r.u64("controller_id")?;
+    let has_commanded = r.bool("has_commanded")?;
+    let commanded: [f64; messages::DOF] = r.f64_array("tau_commanded")?;
     Ok(TorqueRow {
         tick,
         torque: JointTorque { contract_version: CONTRACT_VERSION, controller_status, tick: answered, controller_id, tau },
         held,
+        commanded: has_commanded.then_some(commanded),
     })
 }
 
@@ -541,7 +554,11 @@ mod tests {
         encode_joint_state(&mut buf, &r);
         assert_eq!(decode_joint_state(&buf).unwrap(), r.state);
         encode_joint_torque(&mut buf, &r);
-        assert_eq!(decode_joint_torque(&buf).unwrap(), TorqueRow { tick: 41, torque: r.torque, held: true });
+        assert_eq!(decode_joint_torque(&buf).unwrap(), TorqueRow { tick: 41, torque: r.torque, held: true, commanded: None });
+        let mut with_cmd = r;
+        with_cmd.commanded = Some([1.5, -2.5, 3.5, -4.5, 5.5, -6.5]);
+        encode_joint_torque(&mut buf, &with_cmd);
+        assert_eq!(decode_joint_torque(&buf).unwrap().commanded, with_cmd.commanded);
         encode_wrench(&mut buf, &r);
         assert_eq!(decode_wrench(&buf).unwrap(), r.wrench);
         encode_controller(&mut buf, &r);
@@ -581,7 +598,10 @@ mod tests {
             fields(JOINT_STATE.schema_text),
             ["tick", "sim_time", "q", "qd", "tau_applied", "period", "plant_status", "flags", "consecutive_misses", "total_misses"]
         );
-        assert_eq!(fields(JOINT_TORQUE.schema_text), ["tick", "answered_tick", "tau", "held", "controller_status", "controller_id"]);
+        assert_eq!(
+            fields(JOINT_TORQUE.schema_text),
+            ["tick", "answered_tick", "tau", "held", "controller_status", "controller_id", "has_commanded", "tau_commanded"]
+        );
         assert_eq!(fields(WRENCH.schema_text), ["tick", "force", "torque", "frame"]);
         assert_eq!(
             fields(STRIP.schema_text),

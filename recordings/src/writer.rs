@@ -233,6 +233,15 @@ impl Recorder {
     /// Queues one tick. Wait-free; returns false (and counts a drop) if the queue is full.
     #[inline]
     pub fn record_tick(&mut self, r: &TickRecord) -> bool {
+        self.record_tick_commanded(r, None)
+    }
+
+    /// Like [`record_tick`](Self::record_tick), plus the controller's own answer for this tick
+    /// as received (`None` if none came in time). `/joint_torque.tau` is what the plant applied
+    /// (held, refused or blended in); with the answer recorded too, `rig replay` compares a
+    /// controller on every answered tick instead of only where applied == answered.
+    #[inline]
+    pub fn record_tick_commanded(&mut self, r: &TickRecord, commanded: Option<&messages::JointTorque>) -> bool {
         let Some(p) = self.producer.as_mut() else { return false };
         let Ok(mut chunk) = p.write_chunk_uninit(1) else {
             self.shared.dropped_ticks.fetch_add(1, Ordering::Relaxed);
@@ -245,7 +254,9 @@ impl Recorder {
         // first n pressures; the reader reads exactly those for a Kind::Tick slot.
         unsafe {
             std::ptr::addr_of_mut!((*slot).kind).write(Kind::Tick);
-            std::ptr::addr_of_mut!((*slot).tick).write(MaybeUninit::new(TickHead::of(r)));
+            let mut head = TickHead::of(r);
+            head.commanded = commanded.map(|t| t.tau);
+            std::ptr::addr_of_mut!((*slot).tick).write(MaybeUninit::new(head));
             let dst = std::ptr::addr_of_mut!((*slot).pressure_pa) as *mut f32;
             for (i, &v) in r.strip.centreline_pressure_pa[..n].iter().enumerate() {
                 dst.add(i).write(v as f32);

@@ -184,3 +184,29 @@ fn commands_refuse_a_cut_file_unless_allowed_and_name_the_way_out() {
     let err = format!("{:#}", recordings::cli::summary_numbers(&junk).unwrap_err());
     assert!(err.contains("not an MCAP recording"), "{err}");
 }
+
+#[test]
+fn the_controllers_own_answer_is_recorded_beside_the_applied_torque() {
+    let run = SyntheticRun { ticks: 200, ..Default::default() };
+    let path = tmp("commanded.mcap");
+    let mut rec = Recorder::start(small_chunks(&path, &run)).unwrap();
+    for k in 0..run.ticks {
+        let r = run.tick(k);
+        let mut answer = r.torque;
+        answer.tau[2] += 1.0; // e.g. a blended-in tick: the answer differs from what was applied
+        let cmd = (k % 3 != 0).then_some(&answer);
+        assert!(rec.record_tick_commanded(&r, cmd));
+    }
+    rec.finish().unwrap();
+    let back = Recording::open_complete(&path).unwrap();
+    for (k, row) in back.joint_torque.iter().enumerate() {
+        let applied = run.tick(k as u64).torque.tau;
+        assert_eq!(row.torque.tau, applied);
+        let want = (k % 3 != 0).then(|| {
+            let mut a = applied;
+            a[2] += 1.0;
+            a
+        });
+        assert_eq!(row.commanded, want, "tick {k}");
+    }
+}
