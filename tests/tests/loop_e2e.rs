@@ -183,6 +183,31 @@ fn controller_of_another_contract_version_is_refused_with_both_versions() {
 }
 
 #[test]
+fn non_finite_torques_are_refused_counted_and_lead_to_the_safe_stop() {
+    let _g = serial();
+    let t = TestRig::new("nan", "lockstep");
+    let mut plant = t.plant(0.3);
+    let mut h = t.controller("hold", "hold-controller", &["--nan-from-tick", "100"]);
+    assert!(plant.expect_exit(LONG).success(), "plant: {}", plant.stderr());
+    assert!(h.expect_exit(Duration::from_secs(10)).success(), "hold-controller: {}", h.stderr());
+    let rec = Recording::open_complete(t.recording()).unwrap();
+    let refused = events(&rec, EventKind::TorqueRefused);
+    assert_eq!(refused.len(), 1, "one event per refusal streak: {refused:?}");
+    assert_eq!(refused[0].0, 100);
+    assert!(refused[0].1.contains("joint 1") && refused[0].1.contains("not finite"), "{}", refused[0].1);
+    // Every tick from 100 on holds (then safe-stops) instead of applying the NaN.
+    for row in &rec.joint_torque {
+        assert_eq!(row.held, row.tick >= 100, "tick {}", row.tick);
+        assert!(row.torque.tau.iter().all(|x| x.is_finite()), "tick {}", row.tick);
+    }
+    let stops = events(&rec, EventKind::SafeStop);
+    assert_eq!(stops.first().map(|s| s.0), Some(119), "safe stop at the 20th consecutive miss: {stops:?}");
+    let s = plant_summary(&plant);
+    assert_eq!(s["refusals"], 200, "{s}");
+    assert_eq!(s["misses"], 200, "{s}");
+}
+
+#[test]
 fn killed_plant_makes_the_controller_exit_and_a_new_plant_starts_clean() {
     let _g = serial();
     let t = TestRig::new("deadplant", "realtime");

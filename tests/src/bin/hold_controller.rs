@@ -26,6 +26,9 @@ struct Args {
     /// Constant torque added to joint 1, N m (to make this controller's output recognisable).
     #[arg(long, default_value_t = 0.0)]
     offset_nm: f64,
+    /// From this tick on, send NaN on joint 1 (testing the plant's refusal).
+    #[arg(long)]
+    nan_from_tick: Option<u64>,
 }
 
 /// Closed-loop natural frequency (rad/s) and damping ratio of every joint: ω T = 0.06 at 1 kHz.
@@ -80,6 +83,9 @@ fn run(a: &Args) -> anyhow::Result<()> {
         let qdd = (q_ref - q) * (OMEGA * OMEGA) - qd * (2.0 * ZETA * OMEGA);
         let mut tau = robot.rnea(&q, &qd, &qdd);
         tau[0] += a.offset_nm;
+        if a.nan_from_tick.is_some_and(|k| st.tick >= k) {
+            tau[0] = f64::NAN;
+        }
         let t = JointTorque {
             contract_version: a.contract_version,
             controller_status: ControllerStatus::Active as u32,
