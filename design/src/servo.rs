@@ -11,7 +11,7 @@ use controller::model::{controller_robot, tool_down_rotation, TaskFrame};
 use controller::reference::{Phase, ReferenceGenerator, ReferenceParams};
 use messages::{JointState, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
 use plant_sim::physics::Physics;
-use recordings::{StripRecord, MAX_CENTRELINE};
+use recordings::StripRecord;
 use scenario::Scenario;
 
 /// One recorded sample of the servo run (per tick).
@@ -86,15 +86,7 @@ pub fn run_servo_full(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow
     let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
     let period = s.loop_.period_s;
     let mut out = Vec::new();
-    let mut rec = StripRecord {
-        wheel_z_m: 0.0,
-        contact_force_n: 0.0,
-        bottom_force_n: 0.0,
-        max_bottom_pressure_pa: 0.0,
-        top_displacement_m: 0.0,
-        n_centreline: 0,
-        centreline_pressure_pa: [0.0; MAX_CENTRELINE],
-    };
+    let mut rec = StripRecord::default();
     let max_ticks = if duration_s > 0.0 { (duration_s / period).round() as u64 } else { (60.0 / period) as u64 };
     let mut done_at: Option<u64> = None;
     let centreline_z_m: Vec<f64> = physics.contact().map_or(Vec::new(), |c| c.centreline_z_m().to_vec());

@@ -9,7 +9,7 @@ use controller::law::impedance_accel;
 use controller::reference::{Phase, ReferenceGenerator, ReferenceParams};
 use nalgebra::{Matrix3, Vector3};
 use plant_sim::contact::{ContactGeometry, StripContact};
-use recordings::{StripRecord, MAX_CENTRELINE};
+use recordings::StripRecord;
 use robot::Vec6;
 use scenario::Scenario;
 use strip::StripModel;
@@ -29,7 +29,7 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
     let start = reference.params().start_task_m;
     let (mut y, mut vy, mut z) = (start.y, 0.0, start.z);
     let mut integral = 0.0;
-    let mut rec = StripRecord { wheel_z_m: 0.0, contact_force_n: 0.0, bottom_force_n: 0.0, max_bottom_pressure_pa: 0.0, top_displacement_m: 0.0, n_centreline: 0, centreline_pressure_pa: [0.0; MAX_CENTRELINE] };
+    let mut rec = StripRecord::default();
     let mut out = Vec::new();
     let mut done_ticks = 0;
     let (kp, kd) = (gains.kp_pos, gains.kd_pos);

@@ -476,7 +476,7 @@ mod tests {
         let p = -c.contact_force_n();
         assert!((p - p_expect).abs() < 1e-4 * p_expect, "p = {p}, expected {p_expect}");
         assert!(c.in_contact());
-        let mut r = StripRecord { wheel_z_m: 0.0, contact_force_n: 0.0, bottom_force_n: 0.0, max_bottom_pressure_pa: 0.0, top_displacement_m: 0.0, n_centreline: 0, centreline_pressure_pa: [0.0; MAX_CENTRELINE] };
+        let mut r = StripRecord::default();
         c.fill_record(&mut r);
         assert!((r.bottom_force_n - c.contact_force_n()).abs() < 1e-4 * p, "bottom {} vs contact {}", r.bottom_force_n, c.contact_force_n());
         assert!((r.wheel_z_m - z).abs() < 1e-12);
