@@ -50,6 +50,9 @@ pub struct ReferenceParams {
     pub approach_speed_mps: f64,
     /// Time over which the approach speed ramps in (cosine), s.
     pub approach_ramp_s: f64,
+    /// Deepest the approach reference goes below the start height, m: the approach height plus
+    /// [`APPROACH_OVERTRAVEL_M`]. Without contact (no strip, missed strip) the wheel stops there.
+    pub approach_max_descent_m: f64,
     pub contact_threshold_n: f64,
     pub force_ref_n: f64,
     pub force_ramp_s: f64,
@@ -76,6 +79,7 @@ impl ReferenceParams {
             settle_s: t.settle_s,
             approach_speed_mps: t.approach_speed_mm_s * 1e-3,
             approach_ramp_s: 0.05,
+            approach_max_descent_m: t.approach_height_mm * 1e-3 + APPROACH_OVERTRAVEL_M,
             contact_threshold_n: t.contact_threshold_n,
             force_ref_n: t.force_ref_n,
             force_ramp_s: t.force_ramp_s,
@@ -89,6 +93,9 @@ impl ReferenceParams {
         }
     }
 }
+
+/// How far below the nominal strip top the approach may go looking for contact, m.
+pub const APPROACH_OVERTRAVEL_M: f64 = 1e-3;
 
 /// Smooth 0 → 1 blend `(1 − cos πx)/2` and its first two derivatives in x (clamped outside [0, 1]).
 #[inline]
@@ -122,17 +129,27 @@ pub fn cosine_velocity_profile(tau: f64, duration: f64, distance: f64) -> (f64, 
 }
 
 /// Approach descent below the start height after `tau` s: speed ramps in with a cosine over
-/// `ramp` s, then stays constant. Returns (descent, speed, acceleration), all ≥ 0 downwards.
+/// `ramp` s, then stays constant; the descent stops at `max_descent` (the speed ramps out with the
+/// same cosine, so the reference stays C¹). Returns (descent, speed, acceleration), all ≥ 0 downwards.
 #[inline]
-fn approach_profile(tau: f64, ramp: f64, speed: f64) -> (f64, f64, f64) {
+fn approach_profile(tau: f64, ramp: f64, speed: f64, max_descent: f64) -> (f64, f64, f64) {
     use std::f64::consts::PI;
+    // Ramp-in and ramp-out each cover speed·ramp/2; the cruise time follows from max_descent.
+    let t_cruise_end = (max_descent / speed).max(ramp);
     if tau <= 0.0 {
         (0.0, 0.0, 0.0)
     } else if tau < ramp {
         let (s, c) = (PI * tau / ramp).sin_cos();
         (speed * (0.5 * tau - ramp / (2.0 * PI) * s), speed * 0.5 * (1.0 - c), speed * 0.5 * PI / ramp * s)
-    } else {
+    } else if tau < t_cruise_end {
         (speed * (tau - 0.5 * ramp), speed, 0.0)
+    } else if tau < t_cruise_end + ramp {
+        let x = tau - t_cruise_end;
+        let (s, c) = (PI * x / ramp).sin_cos();
+        let d_cruise = speed * (t_cruise_end - 0.5 * ramp);
+        (d_cruise + speed * (0.5 * x + ramp / (2.0 * PI) * s), speed * 0.5 * (1.0 + c), -speed * 0.5 * PI / ramp * s)
+    } else {
+        (speed * t_cruise_end, 0.0, 0.0)
     }
 }
 
@@ -189,7 +206,7 @@ impl ReferenceGenerator {
                 Phase::Settle if tau >= p.settle_s => Some(Phase::Approach),
                 Phase::Approach if force_y_n.abs() > p.contact_threshold_n => {
                     self.force_at_contact_n = force_y_n;
-                    let (d, _, _) = approach_profile(tau, p.approach_ramp_s, p.approach_speed_mps);
+                    let (d, _, _) = approach_profile(tau, p.approach_ramp_s, p.approach_speed_mps, p.approach_max_descent_m);
                     self.y_at_contact_m = p.start_task_m.y - d;
                     Some(Phase::ForceRamp)
                 }
@@ -249,7 +266,7 @@ impl ReferenceGenerator {
         match self.phase {
             Phase::Settle => {}
             Phase::Approach => {
-                let (d, v, a) = approach_profile(tau, p.approach_ramp_s, p.approach_speed_mps);
+                let (d, v, a) = approach_profile(tau, p.approach_ramp_s, p.approach_speed_mps, p.approach_max_descent_m);
                 r.pos_m.y = s.y - d;
                 r.vel_mps.y = -v;
                 r.acc_mps2.y = -a;
@@ -376,6 +393,30 @@ mod tests {
         let last = prev.unwrap();
         assert!((last.pos_m.z - p.z_end_m).abs() < 1e-15);
         assert!((last.pos_m.y - p.lift_y_m).abs() < 1e-12);
+    }
+
+    /// Without contact the approach stops at the nominal strip top minus the overtravel, smoothly
+    /// (velocity continuous, acceleration the derivative of velocity).
+    #[test]
+    fn approach_without_contact_stops_below_the_strip_top() {
+        let mut g = gen();
+        let p = *g.params();
+        let dt = 1e-4;
+        let mut prev = g.update(0.0, 0.0, p.start_task_m.y);
+        let mut t = dt;
+        while t < 2.0 {
+            let r = g.update(t, 0.0, p.start_task_m.y);
+            assert!((r.vel_mps.y - prev.vel_mps.y).abs() <= 0.5 * dt, "velocity jump at {t}");
+            let a_fd = (r.vel_mps.y - prev.vel_mps.y) / dt;
+            assert!((a_fd - 0.5 * (r.acc_mps2.y + prev.acc_mps2.y)).abs() < 1e-3, "accel at {t}: {a_fd}");
+            prev = r;
+            t += dt;
+        }
+        assert_eq!(prev.phase, Phase::Approach);
+        assert!(prev.vel_mps.y == 0.0);
+        let r = Scenario::default().robot.wheel_radius_mm * 1e-3;
+        let expect = STRIP_TOP_HEIGHT_M + r - APPROACH_OVERTRAVEL_M;
+        assert!((prev.pos_m.y - expect).abs() < 1e-12, "{} vs {expect}", prev.pos_m.y);
     }
 
     #[test]
