@@ -13,7 +13,7 @@ fn cold(c: &mut Criterion) {
     let p2 = StripParams { element_m: 2e-3, ..Default::default() };
     g.bench_function("2mm", |b| b.iter(|| StripModel::build(black_box(&p2)).unwrap()));
     let p1 = StripParams::default();
-    g.measurement_time(Duration::from_secs(60));
+    g.measurement_time(Duration::from_secs(35));
     g.bench_function("1mm", |b| b.iter(|| StripModel::build(black_box(&p1)).unwrap()));
     g.finish();
 }
@@ -40,7 +40,17 @@ fn cache_and_step(c: &mut Criterion) {
         })
     });
     c.bench_function("step_gaussian_vector_250", |b| b.iter(|| st.step(black_box(&u))));
-    c.bench_function("set_wheel", |b| b.iter(|| st.set_wheel(black_box(&w))));
+    c.bench_function("set_wheel_exact", |b| b.iter(|| st.set_wheel(black_box(&w))));
+    let mut za = 0.0;
+    c.bench_function("set_wheel_z_table", |b| {
+        b.iter(|| {
+            za = (za + 1.37e-4) % 0.04;
+            st.set_wheel_z(black_box(za))
+        })
+    });
+    let mut cr = vec![0.0; model.centre_line().count()];
+    c.bench_function("wheel_centre_reactions", |b| b.iter(|| st.wheel_centre_reactions(black_box(-10.0), &mut cr)));
+    c.bench_function("stepper_new_dt", |b| b.iter(|| StripStepper::new(black_box(&model), 1e-4)));
     let (mut top, mut bot) = (vec![0.0; model.n_top()], vec![0.0; model.n_bottom()]);
     c.bench_function("outputs_all", |b| b.iter(|| st.outputs(black_box(&u), &mut top, &mut bot)));
     let _ = std::fs::remove_dir_all(&dir);

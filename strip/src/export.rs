@@ -18,20 +18,22 @@ use npyz::WriterBuilder;
 
 use crate::model::{StripModel, GAUSS_A, GAUSS_B, GAUSS_C};
 
-fn put_f64(w: &mut npyz::npz::NpzWriter<std::io::BufWriter<std::fs::File>>, name: &str, shape: &[u64], data: &[f64]) -> anyhow::Result<()> {
+type Npz = npyz::npz::NpzWriter<std::io::BufWriter<std::fs::File>>;
+
+fn put<T: npyz::Serialize + npyz::AutoSerialize + Copy>(w: &mut Npz, name: &str, shape: &[u64], data: &[T]) -> anyhow::Result<()> {
     let opts = npyz::zip::write::FileOptions::default().compression_method(npyz::zip::CompressionMethod::Stored);
-    let mut a = w.array::<f64>(name, opts)?.default_dtype().shape(shape).begin_nd()?;
+    let mut a = w.array::<T>(name, opts)?.default_dtype().shape(shape).begin_nd()?;
     a.extend(data.iter().copied())?;
     a.finish()?;
     Ok(())
 }
 
-fn put_i64(w: &mut npyz::npz::NpzWriter<std::io::BufWriter<std::fs::File>>, name: &str, shape: &[u64], data: &[i64]) -> anyhow::Result<()> {
-    let opts = npyz::zip::write::FileOptions::default().compression_method(npyz::zip::CompressionMethod::Stored);
-    let mut a = w.array::<i64>(name, opts)?.default_dtype().shape(shape).begin_nd()?;
-    a.extend(data.iter().copied())?;
-    a.finish()?;
-    Ok(())
+fn put_f64(w: &mut Npz, name: &str, shape: &[u64], data: &[f64]) -> anyhow::Result<()> {
+    put(w, name, shape, data)
+}
+
+fn put_i64(w: &mut Npz, name: &str, shape: &[u64], data: &[i64]) -> anyhow::Result<()> {
+    put(w, name, shape, data)
 }
 
 fn row_major(m: &faer::Mat<f64>) -> Vec<f64> {
