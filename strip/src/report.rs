@@ -40,6 +40,9 @@ pub struct StaticResult {
     pub top_uy_m: Vec<f64>,
     /// Bottom reactions of every bottom node (N).
     pub bottom_reaction_n: Vec<f64>,
+    /// Largest sideways (x) bottom displacement (m): nonzero on the sliding substrate only
+    /// (Figures 4.3, 5.3); None for the reduced model, which does not output it.
+    pub bottom_sideways_max_m: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -85,6 +88,7 @@ fn static_result(model: &StripModel, w: &[f64], top_uy: Vec<f64>, react: Vec<f64
         centreline_pressure: prof,
         top_uy_m: top_uy,
         bottom_reaction_n: react,
+        bottom_sideways_max_m: None,
     }
 }
 
@@ -132,7 +136,16 @@ pub fn compare(model: &StripModel, art: &Artifacts) -> Result<Report> {
     kf.solve_vec(&mut q);
     let mut r_full = vec![0.0; sys.bottom_nodes.len()];
     sys.reactions(&q, None, &mut r_full);
-    let full = static_result(model, &w, sys.top_y_free.iter().map(|&f| q[f]).collect(), r_full);
+    let sideways = |q: &[f64]| {
+        sys.bottom_nodes
+            .iter()
+            .map(|&n| sys.free_of[3 * n]) // x DOF
+            .filter(|&f| f != usize::MAX)
+            .map(|f| q[f].abs())
+            .fold(0.0f64, f64::max)
+    };
+    let mut full = static_result(model, &w, sys.top_y_free.iter().map(|&f| q[f]).collect(), r_full);
+    full.bottom_sideways_max_m = Some(sideways(&q));
     // Craig-Bampton
     let cb = &art.cb;
     let n = cb.k.nrows();
@@ -142,12 +155,14 @@ pub fn compare(model: &StripModel, art: &Artifacts) -> Result<Report> {
     }
     cb.k.llt(Side::Lower).map_err(|e| numeric("CB statics", format!("{e:?}")))?.solve_in_place(pcb.as_mut());
     let rcb = &cb.c_react * &pcb;
-    let cbr = static_result(
+    let mut cbr = static_result(
         model,
         &w,
         cb.input_coord.iter().map(|&c| pcb[(c, 0)]).collect(),
         (0..rcb.nrows()).map(|i| rcb[(i, 0)]).collect(),
     );
+    let pv: Vec<f64> = (0..n).map(|i| pcb[(i, 0)]).collect();
+    cbr.bottom_sideways_max_m = Some(sideways(&cb.expand(&pv, sys.n_free())));
     // reduced
     let y = model.static_response(&u);
     let red = static_result(model, &w, y[..n_top].to_vec(), y[n_top..].to_vec());
@@ -203,8 +218,8 @@ impl Report {
         let _ = writeln!(s, "\nstatic response, {} N wheel at z = {:.1} mm", REPORT_WHEEL_FORCE_N, self.wheel_z_m * 1e3);
         let _ = writeln!(
             s,
-            "{:>8} {:>12} {:>14} {:>16} {:>22} {:>12}",
-            "model", "k_s [N/mm]", "top u_y [mm]", "peak p_c [kPa]", "p_c > 100 kPa z [mm]", "sum R [N]"
+            "{:>8} {:>12} {:>14} {:>16} {:>22} {:>12} {:>16}",
+            "model", "k_s [N/mm]", "top u_y [mm]", "peak p_c [kPa]", "p_c > 100 kPa z [mm]", "sum R [N]", "max |u_x| bot [mm]"
         );
         for (name, r) in [("full", &self.statics.full), ("cb", &self.statics.cb), ("reduced", &self.statics.reduced)] {
             let over = r
@@ -213,13 +228,14 @@ impl Report {
                 .unwrap_or_else(|| "none".into());
             let _ = writeln!(
                 s,
-                "{:>8} {:>12.3} {:>14.5} {:>16.2} {:>22} {:>12.5}",
+                "{:>8} {:>12.3} {:>14.5} {:>16.2} {:>22} {:>12.5} {:>16}",
                 name,
                 r.k_s_n_per_m * 1e-3,
                 r.top_displacement_m * 1e3,
                 r.centreline_peak_pressure_pa * 1e-3,
                 over,
-                r.total_bottom_reaction_n
+                r.total_bottom_reaction_n,
+                r.bottom_sideways_max_m.map(|v| format!("{:.5}", v * 1e3)).unwrap_or_else(|| "-".into())
             );
         }
         let hs = &self.hankel_singular_values;

@@ -40,6 +40,7 @@ fn check_statics(r: &Report) {
 fn two_millimetre_bonded_pipeline() {
     let (r, model) = report_for(&params_2mm());
     check_statics(&r);
+    assert_eq!(r.statics.full.bottom_sideways_max_m, Some(0.0), "bonded bottom cannot slide");
     assert_eq!(model.order(), 250);
     assert!(r.max_real_pole_per_s < 0.0, "reduced model must be stable");
     assert!(r.d_nonzero, "matched DC gives a feed-through");
@@ -55,6 +56,11 @@ fn sliding_substrate_and_incompressible_limit() {
     let (r, _) = report_for(&p);
     check_statics(&r);
     assert!(r.max_real_pole_per_s < 0.0);
+    // the sliding bottom moves sideways (Figures 4.3, 5.3: a few hundredths of a mm at 10 N),
+    // identically in the CB model (statics exact); the bonded one cannot
+    let (sf, sc) = (r.statics.full.bottom_sideways_max_m.unwrap(), r.statics.cb.bottom_sideways_max_m.unwrap());
+    assert!(sf > 1e-6 && sf < 1e-4, "sliding sideways {sf}");
+    assert!((sf - sc).abs() < 1e-9 * sf);
     // nu = 0.4999 does not lock: the wheel stiffness stays within a few percent of nu = 0.49
     let (r49, _) = report_for(&StripParams { poisson: 0.49, ..p.clone() });
     let ratio = r.statics.full.k_s_n_per_m / r49.statics.full.k_s_n_per_m;
