@@ -461,9 +461,16 @@ mod tests {
     /// `StripModel::static_response`); the bottom reactions balance the wheel force.
     #[test]
     fn static_press_matches_the_static_compliance_and_equilibrium() {
+        // On a table grid point and between two (the tabulated wheel direction is interpolated).
+        for z in [0.010, 0.010 + 0.37 * TABLE_STEP_M] {
+            static_press_at(z);
+        }
+    }
+
+    fn static_press_at(z: f64) {
         let model = coarse();
         let g = geo();
-        let (z, depth) = (0.010, 0.2e-3);
+        let depth = 0.2e-3;
         let y_low = STRIP_TOP_HEIGHT_M - depth;
         let c = run_hold(&model, 1e-4, z, y_low, 0.6);
         let mut w = vec![0.0; model.n_top()];
