@@ -396,7 +396,8 @@ impl PlantLoop<'_> {
             rec.timing.plant_compute_ns = plant_ns;
             stats.plant_compute.record(plant_ns);
             if let Some(r) = self.recorder.as_deref_mut() {
-                r.record_tick(&rec);
+                // Applied torque in the record, plus the controller's own answer (for replay).
+                r.record_tick_commanded(&rec, torque.as_ref());
             }
 
             prev = Some(decision);
