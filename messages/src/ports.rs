@@ -48,6 +48,9 @@ pub fn clean_dead_nodes() -> usize {
 }
 
 fn node(rig: &str, role: &str) -> Result<Node<ipc::Service>, PortError> {
+    // iceoryx2 warns on every start that no config file exists; keep its own log to errors unless
+    // the user asks for more with IOX2_LOG_LEVEL.
+    set_log_level_from_env_or(LogLevel::Error);
     let name = format!("{role}/{rig}");
     let name: NodeName = name.as_str().try_into().map_err(|e| err(rig, "node name", e))?;
     // Our daemons handle SIGINT/SIGTERM themselves (finalise the recording, say goodbye).
