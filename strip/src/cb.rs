@@ -44,6 +44,24 @@ fn sym(a: &mut Mat<f64>) {
     }
 }
 
+/// A X with the columns of X split over two threads (the sparse product is memory-bound and
+/// single-threaded in faer).
+fn par_mul_dense(a: &Csc, x: faer::MatRef<'_, f64>) -> Mat<f64> {
+    let k = x.ncols();
+    if k < 64 {
+        return a.mul_dense(x);
+    }
+    let h = k / 2;
+    let (l, r) = std::thread::scope(|s| {
+        let right = s.spawn(|| a.mul_dense(x.subcols(h, k - h)));
+        (a.mul_dense(x.subcols(0, h)), right.join().expect("product thread panicked"))
+    });
+    let mut y = Mat::<f64>::zeros(a.nrows, k);
+    y.as_mut().subcols_mut(0, h).copy_from(&l);
+    y.as_mut().subcols_mut(h, k - h).copy_from(&r);
+    y
+}
+
 fn sparse_t_dense(a: &Csc, x: faer::MatRef<'_, f64>) -> Mat<f64> {
     a.mul_t_dense(x)
 }
@@ -101,16 +119,23 @@ impl CraigBampton {
 
         let chol = Cholesky::new(&k_ii, "Craig-Bampton K_ii factorisation")?;
         lap("factorisation", &mut timings);
-        let mut psi = k_ib.to_dense();
-        chol.solve_in_place(psi.as_mut());
-        for j in 0..psi.ncols() { psi.col_mut(j).iter_mut().for_each(|v| *v = -*v); }
-        lap("constraint_modes", &mut timings);
-        crate::progress::stage("fixed-interface modes");
+        crate::progress::stage("constraint modes and fixed-interface modes");
+        // Both only read the factor: the many-right-hand-side solve for Psi and the
+        // single-vector Lanczos run side by side (each is memory-bound).
         let lmax = (2.0 * std::f64::consts::PI * p.cb_cutoff_hz).powi(2);
-        let modes = lowest_modes(&chol, &k_ii, &m_ii, Want::Below(lmax))?;
+        let (psi, modes) = std::thread::scope(|scope| {
+            let lanczos = scope.spawn(|| lowest_modes(&chol, &k_ii, &m_ii, Want::Below(lmax)));
+            let mut psi = k_ib.to_dense();
+            chol.solve_in_place(psi.as_mut());
+            for j in 0..psi.ncols() {
+                psi.col_mut(j).iter_mut().for_each(|v| *v = -*v);
+            }
+            (psi, lanczos.join().expect("Lanczos thread panicked"))
+        });
+        let modes = modes?;
         let phi = modes.vectors;
         let nm = phi.ncols();
-        lap("fixed_interface_modes", &mut timings);
+        lap("constraint_and_fixed_interface_modes", &mut timings);
         crate::progress::stage("Craig-Bampton matrices");
 
         let n = nb + nm;
@@ -122,7 +147,7 @@ impl CraigBampton {
         let kkk = phi.transpose() * &kphi;
         k.as_mut().submatrix_mut(nb, nb, nm, nm).copy_from(&kkk);
         lap("k_reduced", &mut timings);
-        let x = m_ii.mul_dense(psi.as_ref()); // M_ii Psi
+        let x = par_mul_dense(&m_ii, psi.as_ref()); // M_ii Psi
         lap("m_psi", &mut timings);
         let mibt_psi = sparse_t_dense(&m_ib, psi.as_ref()); // M_ib^T Psi
         let mbb = &m_bb + &mibt_psi + mibt_psi.transpose() + psi.transpose() * &x;
