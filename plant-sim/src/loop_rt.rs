@@ -2,7 +2,7 @@
 //!
 //! Real-time mode, tick k: sleep until the absolute deadline t_k (CLOCK_MONOTONIC, TIMER_ABSTIME),
 //! publish state and wrench of tick k, wait on the torque listener's fd (`ppoll`) until
-//! t_k + budget for the torque answering tick k, let the [`Gate`] decide what to apply, integrate
+//! budget after the publish (at most until t_k+1) for the torque answering tick k, let the [`Gate`] decide what to apply, integrate
 //! [t_k, t_k + T), record. If the thread falls behind by more than a period (a VM stall), the
 //! missed deadlines are skipped and counted as overruns instead of being run in a burst.
 //!
@@ -313,7 +313,9 @@ impl PlantLoop<'_> {
 
             // 3. Wait for the torque of this tick.
             let torque = if paced {
-                self.wait_for_torque(tick, at(deadline_ns + p.budget_ns))
+                // The budget counts from the publish (a plant that woke late must not blame the
+                // controller), but never past the next tick's deadline.
+                self.wait_for_torque(tick, at((publish_ns + p.budget_ns).min(deadline_ns + p.period_ns)))
             } else if self.gate.status() == PlantStatus::WaitingForController {
                 // Lockstep start-up: hold tick 0 until a controller answers it.
                 let mut got = None;
