@@ -108,7 +108,11 @@ fn prepare(
     controller: Option<PathBuf>,
 ) -> anyhow::Result<RigLaunch> {
     // Fail early, with file/line/field, before any process starts.
-    scenario::Scenario::load(&scenario)?;
+    let parsed = scenario::Scenario::load(&scenario)?;
+    let lockstep = match mode.as_deref() {
+        Some(m) => m == "lockstep",
+        None => parsed.loop_.mode == scenario::Mode::Lockstep,
+    };
     let dir = out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating output directory {}", dir.display()))?;
     let plant_bin = supervise::sibling_binary("plant-sim")?;
@@ -129,6 +133,8 @@ fn prepare(
         plant_bin,
         controller_bin,
         cache_dir,
+        // Same CPU as plant-sim's lockstep loop.
+        controller_cpu: lockstep.then(plant_sim::rt::lockstep_cpu),
     })
 }
 

@@ -21,6 +21,8 @@ pub struct RigLaunch {
     pub plant_bin: PathBuf,
     pub controller_bin: PathBuf,
     pub cache_dir: PathBuf,
+    /// Lockstep: start the controller pinned to this CPU, the one `plant-sim` pins its loop to.
+    pub controller_cpu: Option<usize>,
 }
 
 /// How a supervised run ended.
@@ -151,6 +153,15 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
 
     let mut ctrl_cmd = Command::new(&l.controller_bin);
     ctrl_cmd.arg("--rig").arg(&l.rig).arg("--scenario").arg(&l.scenario).stdout(Stdio::inherit()).stderr(Stdio::inherit());
+    if let Some(cpu) = l.controller_cpu {
+        // SAFETY: between fork and exec only sched_setaffinity (async-signal-safe) runs.
+        unsafe {
+            ctrl_cmd.pre_exec(move || {
+                plant_sim::rt::pin_thread_to_cpu(cpu);
+                Ok(())
+            });
+        }
+    }
     let mut controller = match spawn(&mut ctrl_cmd, "controller", &l.controller_bin) {
         Ok(c) => c,
         Err(e) => {

@@ -29,6 +29,23 @@ pub fn setup_thread(priority: Option<i32>) -> RtSetup {
     r
 }
 
+/// The CPU a lockstep rig runs on: the last one. Plant and controller on one CPU hand over
+/// without an inter-processor wake-up (on a 2-vCPU VM: 15 µs instead of 60-75 µs per round
+/// trip); `rig` starts the controller pinned to the same CPU.
+pub fn lockstep_cpu() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get()) - 1
+}
+
+/// Pin the calling thread to one CPU. Returns false if the kernel refused.
+pub fn pin_thread_to_cpu(cpu: usize) -> bool {
+    // SAFETY: a zeroed cpu_set_t is an empty set; CPU_SET writes within it.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        libc::CPU_SET(cpu, &mut set);
+        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0
+    }
+}
+
 /// CLOCK_MONOTONIC now, ns.
 #[inline]
 pub fn now_mono_ns() -> u64 {

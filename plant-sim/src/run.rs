@@ -159,6 +159,12 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     // hands over to the controller across CPUs (waking a halted vCPU) instead of on its own CPU,
     // which measured 50 µs instead of 15 µs per round trip on a 2-vCPU VM.
     let rt_setup = rt::setup_thread((mode == Mode::Realtime).then_some(80));
+    if mode == Mode::Lockstep {
+        let cpu = rt::lockstep_cpu();
+        if !rt::pin_thread_to_cpu(cpu) {
+            tracing::warn!("could not pin the lockstep loop to CPU {cpu}");
+        }
+    }
     if (mode == Mode::Realtime && !rt_setup.sched_fifo) || !rt_setup.mlockall {
         tracing::warn!(
             "real-time set-up incomplete: SCHED_FIFO {}, mlockall {} (needs CAP_SYS_NICE/rtprio and memlock limits); running best-effort",
