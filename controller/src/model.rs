@@ -5,9 +5,7 @@ use nalgebra::{Matrix3, Vector3};
 use robot::{Robot, Tool, Vec6};
 use scenario::Scenario;
 
-/// Nominal height of the undeformed strip top above its bottom (DESIGN section 4: a 4 mm
-/// rectangle plus a half-disc of radius 4 mm), m.
-pub const STRIP_TOP_HEIGHT_M: f64 = 0.008;
+pub use scenario::STRIP_TOP_HEIGHT_M;
 
 /// The tool of the scenario: mass, TCP offset and wheel radius from `scenario.robot`; inertia of
 /// the documented default tool scaled with the mass. As the scenario field says and the plant
@@ -15,15 +13,7 @@ pub const STRIP_TOP_HEIGHT_M: f64 = 0.008;
 /// is the wheel centre, `robot.tool_offset_m` along flange z; the wheel's lowest point lies one
 /// radius below it when the tool points down.
 pub fn tool_from_scenario(s: &Scenario) -> Tool {
-    let default = Tool::default();
-    let scale = if default.mass_kg > 0.0 { s.robot.tool_mass_kg / default.mass_kg } else { 1.0 };
-    Tool {
-        mass_kg: s.robot.tool_mass_kg,
-        com_flange_m: Vector3::new(0.0, 0.0, 0.5 * s.robot.tool_offset_m),
-        inertia_com: default.inertia_com * scale,
-        tcp_offset_flange_m: Vector3::new(0.0, 0.0, s.robot.tool_offset_m),
-        wheel_radius_m: s.robot.wheel_radius_mm * 1e-3,
-    }
+    Tool::wheel_on_bracket(s.robot.tool_mass_kg, s.robot.tool_offset_m, s.robot.wheel_radius_mm * 1e-3)
 }
 
 /// The controller's robot model: the scenario's arm and tool with armature and viscous friction,

@@ -12,13 +12,10 @@
 use std::path::Path;
 
 use anyhow::Context;
-use nalgebra::Vector3;
 use robot::{Robot, Tool, Vec6};
 use scenario::Scenario;
 
-/// Height of the undeformed strip's top above its bottom (DESIGN section 4: a 4 mm rectangle plus
-/// a half-disc of radius 4 mm on top), m.
-pub const STRIP_TOP_HEIGHT_M: f64 = 0.008;
+pub use scenario::STRIP_TOP_HEIGHT_M;
 
 /// The tool the scenario describes (DESIGN section 3). Starts from [`Tool::default`] (a solid
 /// cylinder on the flange z axis) with its mass and inertia scaled to `robot.tool_mass_kg`, the
@@ -27,15 +24,7 @@ pub const STRIP_TOP_HEIGHT_M: f64 = 0.008;
 /// point lies one radius below the TCP when the tool points down.
 /// The controller builds its model with the same rule (`controller::model::tool_from_scenario`).
 pub fn tool_from_scenario(s: &Scenario) -> Tool {
-    let d = Tool::default();
-    let scale = s.robot.tool_mass_kg / d.mass_kg;
-    Tool {
-        mass_kg: s.robot.tool_mass_kg,
-        com_flange_m: Vector3::new(0.0, 0.0, 0.5 * s.robot.tool_offset_m),
-        inertia_com: d.inertia_com * scale,
-        tcp_offset_flange_m: Vector3::new(0.0, 0.0, s.robot.tool_offset_m),
-        wheel_radius_m: s.robot.wheel_radius_mm * 1e-3,
-    }
+    Tool::wheel_on_bracket(s.robot.tool_mass_kg, s.robot.tool_offset_m, s.robot.wheel_radius_mm * 1e-3)
 }
 
 /// The plant robot of a scenario: arm + tool, armature and viscous friction from `[robot]`, every

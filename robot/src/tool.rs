@@ -27,6 +27,21 @@ pub struct Tool {
 }
 
 impl Tool {
+    /// The applicator wheel on a straight bracket along flange z, as a scenario describes it:
+    /// the [`Tool::default`] cylinder with mass and inertia scaled to `mass_kg`, the TCP (the
+    /// wheel centre) `tcp_offset_m` along flange z, the COM half-way there. Plant and controller
+    /// both build their tool with this one rule, so their models agree.
+    pub fn wheel_on_bracket(mass_kg: f64, tcp_offset_m: f64, wheel_radius_m: f64) -> Tool {
+        let d = Tool::default();
+        Tool {
+            mass_kg,
+            com_flange_m: Vector3::new(0.0, 0.0, 0.5 * tcp_offset_m),
+            inertia_com: d.inertia_com * (mass_kg / d.mass_kg),
+            tcp_offset_flange_m: Vector3::new(0.0, 0.0, tcp_offset_m),
+            wheel_radius_m,
+        }
+    }
+
     /// The wheel's point furthest along flange z, in the flange frame: its lowest point, where
     /// it touches the strip, when the tool points straight down.
     pub fn contact_point_flange_m(&self) -> Vector3<f64> {

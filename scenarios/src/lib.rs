@@ -9,6 +9,10 @@
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+/// Height of the undeformed strip's top above its bottom, m: the cross-section of DESIGN section 4
+/// (a 4 mm rectangle plus a half-disc of radius 4 mm on top). Plant and controller share it.
+pub const STRIP_TOP_HEIGHT_M: f64 = 0.008;
+
 /// Errors loading a scenario.
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
