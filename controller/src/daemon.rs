@@ -187,9 +187,10 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         let qd = Vec6::from(state.qd);
         let first = last_tick.is_none();
         if first {
-            // First state: start the references from here (a take-over of a running plant starts
-            // its own run). The design report is logged after this tick's answer is out.
-            reference.reset(state.sim_time_s);
+            // First state: start the references from here (a take-over of a running plant first
+            // moves the TCP from where it is to the start pose, then starts its own run). The design report is logged after this tick's answer is out.
+            let kin = law.kinematics(&q, &qd);
+            reference.reset_from(state.sim_time_s, &kin.pos_task_m);
         }
         let (tau, diag) = step(&mut law, &mut reference, &state, &wrench, &q, &qd, cfg.contract_version);
         let mut diag = diag;

@@ -1,7 +1,8 @@
 //! The scenario's references (thesis Figure 6.6 plus approach and lift-off), in the task frame of
 //! DESIGN section 3, as a small state machine driven by simulated time and the measured force:
 //!
-//! settle (hold the start pose) → approach from above at constant speed (position control along
+//! [return: a controller taking over a running plant first moves the TCP from where it is to the
+//! start pose] → settle (hold the start pose) → approach from above at constant speed (position control along
 //! y) until |F| > threshold → force ramp from the contact force to `force_ref` → dwell → roll
 //! z_start → z_end with a cosine velocity profile → force ramp-down to 0 → lift-off (position
 //! control along y back above the strip) → done (hold).
@@ -17,6 +18,8 @@ use crate::model::STRIP_TOP_HEIGHT_M;
 /// Phase of the run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Phase {
+    /// Take-over of a running plant: C¹ move from the measured TCP position to the start pose.
+    Return,
     Settle,
     Approach,
     ForceRamp,
@@ -166,7 +169,16 @@ pub struct ReferenceGenerator {
     lift_from_y_m: f64,
     /// TCP height reference when force control took over, m (held as the y reference in force mode).
     y_at_contact_m: f64,
+    /// Return phase: where the TCP was at take-over (task frame) and how long the move takes.
+    return_from_m: Vector3<f64>,
+    return_s: f64,
 }
+
+/// Speed of the take-over return move (average), m/s, and its shortest duration, s.
+pub const RETURN_SPEED_MPS: f64 = 0.02;
+pub const RETURN_MIN_S: f64 = 0.3;
+/// A take-over closer than this to the start pose skips the return move, m.
+pub const RETURN_TOLERANCE_M: f64 = 0.5e-3;
 
 impl ReferenceGenerator {
     pub fn new(p: ReferenceParams) -> Self {
@@ -177,6 +189,8 @@ impl ReferenceGenerator {
             force_at_contact_n: 0.0,
             lift_from_y_m: p.start_task_m.y,
             y_at_contact_m: p.start_task_m.y,
+            return_from_m: p.start_task_m,
+            return_s: 0.0,
         }
     }
 
@@ -195,6 +209,20 @@ impl ReferenceGenerator {
         self.t0 = t;
     }
 
+    /// Restart at time `t` with the TCP measured at `tcp_task_m`: if it is away from the start
+    /// pose (a controller taking over a plant that is mid-run or sagged in its safe stop), first
+    /// move it there with a C¹ cosine blend instead of commanding the start pose as a step, so the
+    /// take-over torque stays near the one that was holding the arm.
+    pub fn reset_from(&mut self, t: f64, tcp_task_m: &Vector3<f64>) {
+        self.reset(t);
+        let dist = (self.p.start_task_m - tcp_task_m).norm();
+        if dist > RETURN_TOLERANCE_M {
+            self.phase = Phase::Return;
+            self.return_from_m = *tcp_task_m;
+            self.return_s = (dist / RETURN_SPEED_MPS).max(RETURN_MIN_S);
+        }
+    }
+
     /// Advance to time `t` (s) given the measured force on the strip along task y (N) and the
     /// measured TCP height (task y, m), and return the reference for this tick.
     pub fn update(&mut self, t: f64, force_y_n: f64, tcp_y_m: f64) -> TaskReference {
@@ -203,6 +231,7 @@ impl ReferenceGenerator {
         for _ in 0..8 {
             let tau = t - self.t0;
             let next = match self.phase {
+                Phase::Return if tau >= self.return_s => Some(Phase::Settle),
                 Phase::Settle if tau >= p.settle_s => Some(Phase::Approach),
                 Phase::Approach if force_y_n.abs() > p.contact_threshold_n => {
                     self.force_at_contact_n = force_y_n;
@@ -239,6 +268,7 @@ impl ReferenceGenerator {
     fn phase_duration(&self) -> Option<f64> {
         let p = &self.p;
         match self.phase {
+            Phase::Return => Some(self.return_s),
             Phase::Settle => Some(p.settle_s),
             Phase::ForceRamp => Some(p.force_ramp_s),
             Phase::Dwell => Some(p.dwell_s),
@@ -264,6 +294,13 @@ impl ReferenceGenerator {
         };
         let z_end_offset = p.z_end_m - p.z_start_m;
         match self.phase {
+            Phase::Return => {
+                let (b, db, ddb) = cosine_blend(tau / self.return_s);
+                let d = s - self.return_from_m;
+                r.pos_m = self.return_from_m + d * b;
+                r.vel_mps = d * (db / self.return_s);
+                r.acc_mps2 = d * (ddb / (self.return_s * self.return_s));
+            }
             Phase::Settle => {}
             Phase::Approach => {
                 let (d, v, a) = approach_profile(tau, p.approach_ramp_s, p.approach_speed_mps, p.approach_max_descent_m);
@@ -430,5 +467,39 @@ mod tests {
         assert!(r.force_mode && (r.force_y_n + 0.7).abs() < 1e-12);
         let r = g.update(p.settle_s + 0.02 + p.force_ramp_s - 1e-9, -10.0, p.start_task_m.y);
         assert!((r.force_y_n - p.force_ref_n).abs() < 1e-6);
+    }
+
+    #[test]
+    fn take_over_returns_smoothly_from_the_measured_pose_to_the_start_pose() {
+        let p = ReferenceParams::from_scenario(&Scenario::default());
+        let mut g = ReferenceGenerator::new(p);
+        // Taken over mid-roll: the TCP is 20 mm along the strip and 0.3 mm into it.
+        let here = Vector3::new(0.0, p.start_task_m.y - 3.3e-3, 0.020);
+        let t0 = 1.234;
+        g.reset_from(t0, &here);
+        assert_eq!(g.phase(), Phase::Return);
+        // First reference: where the TCP is, at rest; no force control (no force step either).
+        let r = g.update(t0, 0.0, here.y);
+        assert!((r.pos_m - here).norm() < 1e-15 && r.vel_mps.norm() < 1e-15 && !r.force_mode);
+        // Position and velocity continuous tick to tick (C1), peak speed of a cosine blend.
+        let dist = (p.start_task_m - here).norm();
+        let dur = (dist / RETURN_SPEED_MPS).max(RETURN_MIN_S);
+        let (mut prev, mut vmax) = (r, 0.0f64);
+        let mut t = t0;
+        while g.phase() == Phase::Return {
+            t += 1e-3;
+            let r = g.update(t, 0.0, here.y);
+            assert!((r.pos_m - prev.pos_m).norm() <= 1e-3 * 0.5 * std::f64::consts::PI * dist / dur * 1.0001);
+            vmax = vmax.max(r.vel_mps.norm());
+            prev = r;
+        }
+        assert!((vmax - 0.5 * std::f64::consts::PI * dist / dur).abs() < 1e-3 * vmax);
+        assert_eq!(g.phase(), Phase::Settle);
+        assert!((t - t0 - dur).abs() <= 1e-3 + 1e-12);
+        assert!((prev.pos_m - p.start_task_m).norm() < 1e-9);
+        // Close to the start pose: no return move.
+        let mut g = ReferenceGenerator::new(p);
+        g.reset_from(0.0, &(p.start_task_m + Vector3::new(0.0, 1e-4, 0.0)));
+        assert_eq!(g.phase(), Phase::Settle);
     }
 }
