@@ -81,6 +81,15 @@ fn wait(mut c: Child, limit: Duration) -> std::process::ExitStatus {
     }
 }
 
+/// Wait until the recording at `path` holds at least `bytes` (its first chunks are on disk).
+fn wait_for_recording(path: &Path, bytes: u64, limit: Duration) {
+    let until = Instant::now() + limit;
+    while std::fs::metadata(path).map_or(0, |m| m.len()) < bytes {
+        assert!(Instant::now() < until, "{} did not reach {bytes} bytes within {limit:?}", path.display());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// A lockstep recording of `seconds` with the given controller.
 fn record_lockstep(plant: &Path, controller: &Path, name: &str, seconds: f64) -> PathBuf {
     let out = tmp(name);
@@ -148,8 +157,11 @@ fn a_killed_and_an_interrupted_plant_leave_readable_files() {
         let rig = format!("e2e-{}-{}", std::process::id(), name.replace(".mcap", ""));
         let p = start_plant(&plant, &rig, "realtime", 60.0, &out);
         let c = start_controller(&hold, &rig, &[]);
-        // Run until the file holds a few complete chunks (1 s flush interval).
-        std::thread::sleep(Duration::from_millis(3500));
+        // Run until the file holds a few complete chunks (1 s flush interval). The plant may first
+        // build the strip model (a fresh clone, a loaded machine), so wait for the recording to
+        // grow rather than for a fixed time.
+        wait_for_recording(&out, 256 * 1024, Duration::from_secs(120));
+        std::thread::sleep(Duration::from_millis(2500));
         unsafe { libc::kill(p.id() as i32, signal) };
         let status = wait(p, Duration::from_secs(20));
         let _ = wait(c, Duration::from_secs(10));
