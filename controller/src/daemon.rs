@@ -61,13 +61,17 @@ pub struct DaemonSummary {
     pub mean_compute_ns: f64,
 }
 
-/// Timer slack 1 ns, SCHED_FIFO and mlockall when permitted; each outcome logged once.
+/// Timer slack 1 ns, SCHED_FIFO (priority > 0) and mlockall when permitted; each outcome logged once.
 fn setup_realtime(priority: i32) {
     // SAFETY: plain syscalls on the calling thread/process with valid arguments.
     let (slack, fifo, lock) = unsafe {
         let slack = libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) == 0;
-        let param = libc::sched_param { sched_priority: priority };
-        let fifo = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param);
+        let fifo = if priority > 0 {
+            let param = libc::sched_param { sched_priority: priority };
+            libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param)
+        } else {
+            -1
+        };
         let lock = libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0;
         (slack, fifo, lock)
     };
@@ -76,6 +80,8 @@ fn setup_realtime(priority: i32) {
     }
     if fifo == 0 {
         tracing::info!(priority, "SCHED_FIFO enabled");
+    } else if fifo < 0 {
+        tracing::info!("SCHED_FIFO not requested (--rt-priority 0): default scheduler");
     } else {
         tracing::warn!(
             priority,

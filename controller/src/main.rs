@@ -14,6 +14,10 @@ struct Args {
     /// Scenario TOML file (references, gains, robot model).
     #[arg(long)]
     scenario: PathBuf,
+    /// SCHED_FIFO priority of the control thread (1-99, when permitted); 0 keeps the default
+    /// scheduler. On a VM whose vCPUs are themselves time-shared, FIFO can lengthen wake-ups.
+    #[arg(long, default_value_t = 80)]
+    rt_priority: i32,
     /// Testing only: pretend to speak this contract version.
     #[arg(long, hide = true)]
     contract_version: Option<u32>,
@@ -40,6 +44,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
     messages::services::validate_rig_name(&args.rig).map_err(anyhow::Error::msg)?;
     let scenario = scenario::Scenario::load(&args.scenario)?;
     let mut cfg = controller::daemon::DaemonConfig::new(&args.rig, scenario);
+    cfg.rt_priority = args.rt_priority;
     if let Some(v) = args.contract_version {
         cfg.contract_version = v;
     }
