@@ -201,6 +201,25 @@ pub struct ControllerDiagnostics {
     pub compute_time_ns: u64,
 }
 
+impl ControllerDiagnostics {
+    /// All-zero diagnostics of contract version `contract_version` (no force control, no errors):
+    /// the value recorded for a tick whose controller published none.
+    pub const fn zeroed(contract_version: u32) -> Self {
+        ControllerDiagnostics {
+            contract_version,
+            force_control_active: 0,
+            tick: 0,
+            force_ref_n: 0.0,
+            force_meas_n: 0.0,
+            pos_ref_task_m: [0.0; 3],
+            pos_err_task_m: [0.0; 3],
+            rot_err_task_rad: [0.0; 3],
+            force_integral_ns: 0.0,
+            compute_time_ns: 0,
+        }
+    }
+}
+
 /// Error returned when a peer speaks another contract version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VersionMismatch {

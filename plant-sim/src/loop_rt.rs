@@ -432,15 +432,4 @@ impl PlantLoop<'_> {
     }
 }
 
-const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics {
-    contract_version: 0,
-    force_control_active: 0,
-    tick: 0,
-    force_ref_n: 0.0,
-    force_meas_n: 0.0,
-    pos_ref_task_m: [0.0; 3],
-    pos_err_task_m: [0.0; 3],
-    rot_err_task_rad: [0.0; 3],
-    force_integral_ns: 0.0,
-    compute_time_ns: 0,
-};
+const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics::zeroed(0);

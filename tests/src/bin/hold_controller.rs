@@ -94,16 +94,9 @@ fn run(a: &Args) -> anyhow::Result<()> {
             tau: tau.into(),
         };
         let d = ControllerDiagnostics {
-            contract_version: a.contract_version,
-            force_control_active: 0,
             tick: st.tick,
-            force_ref_n: 0.0,
-            force_meas_n: 0.0,
-            pos_ref_task_m: [0.0; 3],
-            pos_err_task_m: [0.0; 3],
-            rot_err_task_rad: [0.0; 3],
-            force_integral_ns: 0.0,
             compute_time_ns: t0.elapsed().as_nanos() as u64,
+            ..ControllerDiagnostics::zeroed(a.contract_version)
         };
         ports.publish(&t, Some(&d))?;
     }
