@@ -5,14 +5,16 @@
 //! Exits: `Ok` when the plant says `ShuttingDown`; an error (non-zero exit) on a contract version
 //! mismatch (the message names both versions), when no state arrives within
 //! [`DaemonConfig::startup_timeout`] of starting, or when the plant falls silent for
-//! [`DaemonConfig::dead_plant_timeout`] after having been seen.
+//! [`DaemonConfig::dead_plant_timeout`] (100 ms) after having been seen — in lockstep, for the
+//! scenario's `loop.lockstep_watchdog_s`, since a lockstep plant may be slow without being dead.
 
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use messages::ports::{ControllerPorts, Wake};
 use messages::{
-    check_version, ControllerDiagnostics, ControllerStatus, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame,
+    check_version, state_flags, ControllerDiagnostics, ControllerStatus, JointState, JointTorque, PlantStatus, Wrench,
+    WrenchFrame,
 };
 use nalgebra::{Matrix3, Vector3};
 use robot::Vec6;
@@ -45,7 +47,8 @@ impl DaemonConfig {
             rig: rig.to_string(),
             scenario,
             contract_version: messages::CONTRACT_VERSION,
-            startup_timeout: Duration::from_secs(10),
+            // A first run may build the strip model (seconds; minutes at 0.5 mm) before the first state.
+            startup_timeout: Duration::from_secs(120),
             dead_plant_timeout: Duration::from_millis(100),
             rt_priority: 80,
         }
@@ -140,9 +143,13 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     let mut summary = DaemonSummary::default();
     let mut compute_sum_ns: u128 = 0;
 
+    // Silence that means a dead plant. In lockstep the plant may legitimately be slow (a loaded
+    // machine, a batch of runs side by side): there its own torque watchdog is the measure.
+    let lockstep_silence = cfg.dead_plant_timeout.max(Duration::from_secs_f64(s.loop_.lockstep_watchdog_s));
+    let mut silence = cfg.dead_plant_timeout;
     loop {
         let deadline = match last_state_at {
-            Some(t) => t + cfg.dead_plant_timeout,
+            Some(t) => t + silence,
             None => started + cfg.startup_timeout,
         };
         let wake = ports.wait_state(deadline);
@@ -155,7 +162,7 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
                     Some(t) => bail!(
                         "rig {:?}: no joint state for {} ms after tick {t}: the plant died or stalled; exiting",
                         cfg.rig,
-                        cfg.dead_plant_timeout.as_millis()
+                        silence.as_millis()
                     ),
                     None => bail!(
                         "rig {:?}: no joint state within {:.1} s of starting: is plant-sim running on this rig?",
@@ -171,6 +178,7 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
             }
         };
         last_state_at = Some(woke);
+        silence = if state.flags & state_flags::LOCKSTEP != 0 { lockstep_silence } else { cfg.dead_plant_timeout };
         if handle_state_or_exit(cfg, &state)? {
             summary.mean_compute_ns = if summary.ticks_answered > 0 { compute_sum_ns as f64 / summary.ticks_answered as f64 } else { 0.0 };
             tracing::info!(
