@@ -188,6 +188,45 @@ pub enum Wake {
     Timeout,
 }
 
+type PsFactory<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
+type EventFactory = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
+
+/// Every service of one rig, opened (or created) with the contract's QoS by one node. Both ends
+/// open the same set and differ only in which ports they take from it.
+struct RigServices {
+    state: PsFactory<JointState>,
+    wrench: PsFactory<Wrench>,
+    torque: PsFactory<JointTorque>,
+    diag: PsFactory<ControllerDiagnostics>,
+    state_ready: EventFactory,
+    torque_ready: EventFactory,
+    // Last: the node must outlive its services.
+    _node: Node<ipc::Service>,
+}
+
+impl RigServices {
+    fn open(rig: &str, role: &str) -> Result<Self, PortError> {
+        let node = node(rig, role)?;
+        Ok(Self {
+            state: pubsub!(node, rig, services::JOINT_STATE, JointState),
+            wrench: pubsub!(node, rig, services::WRENCH, Wrench),
+            torque: pubsub!(node, rig, services::JOINT_TORQUE, JointTorque),
+            diag: pubsub!(node, rig, services::CONTROLLER_DIAGNOSTICS, ControllerDiagnostics),
+            state_ready: event(&node, rig, services::STATE_READY)?,
+            torque_ready: event(&node, rig, services::TORQUE_READY)?,
+            _node: node,
+        })
+    }
+
+    fn listener(f: &EventFactory, rig: &str) -> Result<Listener, PortError> {
+        f.listener_builder().create().map_err(|e| err(rig, "create listener", e))
+    }
+
+    fn notifier(f: &EventFactory, rig: &str) -> Result<Notifier, PortError> {
+        f.notifier_builder().create().map_err(|e| err(rig, "create notifier", e))
+    }
+}
+
 /// The plant's end: publishes state and wrench, receives torques and diagnostics.
 pub struct PlantPorts {
     rig: String,
@@ -198,35 +237,26 @@ pub struct PlantPorts {
     state_ready: Notifier,
     torque_ready: Listener,
     torque_fd: i32,
-    // Services and node last: ports must drop before them.
-    _services: Box<dyn core::any::Any>,
-    _node: Node<ipc::Service>,
+    // Last: ports must drop before their services and node.
+    _services: RigServices,
 }
 
 impl PlantPorts {
     /// Open (or create) every service of rig `rig` as the plant. `role` names the node
     /// (e.g. "plant-sim" or "replay").
     pub fn open(rig: &str, role: &str) -> Result<Self, PortError> {
-        let node = node(rig, role)?;
-        let s_state = pubsub!(node, rig, services::JOINT_STATE, JointState);
-        let s_wrench = pubsub!(node, rig, services::WRENCH, Wrench);
-        let s_torque = pubsub!(node, rig, services::JOINT_TORQUE, JointTorque);
-        let s_diag = pubsub!(node, rig, services::CONTROLLER_DIAGNOSTICS, ControllerDiagnostics);
-        let e_state = event(&node, rig, services::STATE_READY)?;
-        let e_torque = event(&node, rig, services::TORQUE_READY)?;
-        let torque_ready = e_torque.listener_builder().create().map_err(|e| err(rig, "create listener", e))?;
-        let torque_fd = listener_fd(&torque_ready);
+        let s = RigServices::open(rig, role)?;
+        let torque_ready = RigServices::listener(&s.torque_ready, rig)?;
         Ok(Self {
             rig: rig.to_string(),
-            state_pub: publisher(&s_state, rig)?,
-            wrench_pub: publisher(&s_wrench, rig)?,
-            torque_sub: subscriber(&s_torque, rig)?,
-            diag_sub: subscriber(&s_diag, rig)?,
-            state_ready: e_state.notifier_builder().create().map_err(|e| err(rig, "create notifier", e))?,
+            state_pub: publisher(&s.state, rig)?,
+            wrench_pub: publisher(&s.wrench, rig)?,
+            torque_sub: subscriber(&s.torque, rig)?,
+            diag_sub: subscriber(&s.diag, rig)?,
+            state_ready: RigServices::notifier(&s.state_ready, rig)?,
+            torque_fd: listener_fd(&torque_ready),
             torque_ready,
-            torque_fd,
-            _services: Box::new((s_state, s_wrench, s_torque, s_diag, e_state, e_torque)),
-            _node: node,
+            _services: s,
         })
     }
 
@@ -278,33 +308,24 @@ pub struct ControllerPorts {
     torque_ready: Notifier,
     state_ready: Listener,
     state_fd: i32,
-    _services: Box<dyn core::any::Any>,
-    _node: Node<ipc::Service>,
+    _services: RigServices,
 }
 
 impl ControllerPorts {
     /// Open (or create) every service of rig `rig` as a controller.
     pub fn open(rig: &str, role: &str) -> Result<Self, PortError> {
-        let node = node(rig, role)?;
-        let s_state = pubsub!(node, rig, services::JOINT_STATE, JointState);
-        let s_wrench = pubsub!(node, rig, services::WRENCH, Wrench);
-        let s_torque = pubsub!(node, rig, services::JOINT_TORQUE, JointTorque);
-        let s_diag = pubsub!(node, rig, services::CONTROLLER_DIAGNOSTICS, ControllerDiagnostics);
-        let e_state = event(&node, rig, services::STATE_READY)?;
-        let e_torque = event(&node, rig, services::TORQUE_READY)?;
-        let state_ready = e_state.listener_builder().create().map_err(|e| err(rig, "create listener", e))?;
-        let state_fd = listener_fd(&state_ready);
+        let s = RigServices::open(rig, role)?;
+        let state_ready = RigServices::listener(&s.state_ready, rig)?;
         Ok(Self {
             rig: rig.to_string(),
-            state_sub: subscriber(&s_state, rig)?,
-            wrench_sub: subscriber(&s_wrench, rig)?,
-            torque_pub: publisher(&s_torque, rig)?,
-            diag_pub: publisher(&s_diag, rig)?,
-            torque_ready: e_torque.notifier_builder().create().map_err(|e| err(rig, "create notifier", e))?,
+            state_sub: subscriber(&s.state, rig)?,
+            wrench_sub: subscriber(&s.wrench, rig)?,
+            torque_pub: publisher(&s.torque, rig)?,
+            diag_pub: publisher(&s.diag, rig)?,
+            torque_ready: RigServices::notifier(&s.torque_ready, rig)?,
+            state_fd: listener_fd(&state_ready),
             state_ready,
-            state_fd,
-            _services: Box::new((s_state, s_wrench, s_torque, s_diag, e_state, e_torque)),
-            _node: node,
+            _services: s,
         })
     }
 
