@@ -39,10 +39,14 @@ pub struct DaemonConfig {
     pub dead_plant_timeout: Duration,
     /// SCHED_FIFO priority to request.
     pub rt_priority: i32,
+    /// Real time only: busy-poll for the next state from this long before it is due until this
+    /// long after (0 = always sleep in `ppoll`). See [`wait_for_state`].
+    pub state_spin: Duration,
 }
 
 impl DaemonConfig {
     pub fn new(rig: &str, scenario: Scenario) -> Self {
+        let state_spin = Duration::from_secs_f64(scenario_spin_s(&scenario));
         DaemonConfig {
             rig: rig.to_string(),
             scenario,
@@ -51,6 +55,7 @@ impl DaemonConfig {
             startup_timeout: Duration::from_secs(120),
             dead_plant_timeout: Duration::from_millis(100),
             rt_priority: 80,
+            state_spin,
         }
     }
 }
@@ -147,12 +152,13 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     // machine, a batch of runs side by side): there its own torque watchdog is the measure.
     let lockstep_silence = cfg.dead_plant_timeout.max(Duration::from_secs_f64(s.loop_.lockstep_watchdog_s));
     let mut silence = cfg.dead_plant_timeout;
+    let mut next_due: Option<Instant> = None;
     loop {
         let deadline = match last_state_at {
             Some(t) => t + silence,
             None => started + cfg.startup_timeout,
         };
-        let wake = ports.wait_state(deadline);
+        let wake = wait_for_state(&ports, next_due.map(|due| (due, cfg.state_spin)), deadline);
         let woke = Instant::now();
         let state = if wake == Wake::Timeout {
             // A notification may have been consumed while we computed: one last look.
@@ -178,7 +184,11 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
             }
         };
         last_state_at = Some(woke);
-        silence = if state.flags & state_flags::LOCKSTEP != 0 { lockstep_silence } else { cfg.dead_plant_timeout };
+        let lockstep = state.flags & state_flags::LOCKSTEP != 0;
+        silence = if lockstep { lockstep_silence } else { cfg.dead_plant_timeout };
+        // The plant publishes on an absolute 1 ms grid: the next state is due one period after
+        // this one arrived. Lockstep has no grid (and both daemons share one CPU: never spin there).
+        next_due = (!lockstep && !cfg.state_spin.is_zero()).then(|| woke + Duration::from_secs_f64(state.period_s));
         if handle_state_or_exit(cfg, &state)? {
             summary.mean_compute_ns = if summary.ticks_answered > 0 { compute_sum_ns as f64 / summary.ticks_answered as f64 } else { 0.0 };
             tracing::info!(
@@ -239,6 +249,35 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
             );
         }
     }
+}
+
+/// The scenario's `loop.controller_spin_us`, s.
+fn scenario_spin_s(s: &Scenario) -> f64 {
+    s.loop_.controller_spin_us * 1e-6
+}
+
+/// Wait for the next state until `deadline`. With `spin = Some((due, w))` (real time), sleep in
+/// `ppoll` until `due − w`, then poll the subscriber's shared memory until `due + w`, then sleep
+/// again. A vCPU that halted in `ppoll` needs tens of µs to wake on the plant's notification (the
+/// round trip pays it twice); a thread already awake at the due time sees the state within a µs,
+/// for a bounded `2 w` of CPU per tick (the other process keeps the rest of both cores).
+fn wait_for_state(ports: &ControllerPorts, spin: Option<(Instant, Duration)>, deadline: Instant) -> Wake {
+    if let Some((due, w)) = spin {
+        let from = due.checked_sub(w).unwrap_or(due).min(deadline);
+        if ports.wait_state(from) == Wake::Notified || ports.state_pending() {
+            return Wake::Notified;
+        }
+        let until = (due + w).min(deadline);
+        while Instant::now() < until {
+            if ports.state_pending() {
+                // Consume the notification that comes with it, if it is already there.
+                let _ = ports.wait_state(Instant::now());
+                return Wake::Notified;
+            }
+            std::hint::spin_loop();
+        }
+    }
+    ports.wait_state(deadline)
 }
 
 /// Version check and shutdown detection of one state: Ok(true) = the plant shuts down.

@@ -81,10 +81,17 @@ struct TimingArgs {
     /// Also write the plant's summary JSON (all distributions) to this file.
     #[arg(long)]
     json: Option<PathBuf>,
-    /// Let the plant busy-poll for the torque this long before sleeping (scenario
-    /// `loop.spin_wait_us`; default scenario: 0 = no busy polling).
-    #[arg(long, default_value_t = 0.0)]
-    spin_us: f64,
+    /// Let the plant busy-poll for the torque this long before sleeping, µs (scenario
+    /// `loop.spin_wait_us`; default: the default scenario's).
+    #[arg(long)]
+    spin_us: Option<f64>,
+    /// Let the controller busy-poll from this long before the state is due until this long
+    /// after, µs (scenario `loop.controller_spin_us`; default: the default scenario's).
+    #[arg(long)]
+    controller_spin_us: Option<f64>,
+    /// Let idle CPUs halt (do not hold /dev/cpu_dma_latency at 0; scenario `loop.idle_poll`).
+    #[arg(long)]
+    no_idle_poll: bool,
 }
 
 /// UTC time as `YYYYmmdd-HHMMSS`.
@@ -187,7 +194,7 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
 
 /// The timing scenario: the default one without the strip, holding the start pose (no approach),
 /// in real-time mode, written next to the recording.
-fn timing_scenario(dir: &Path, spin_us: f64) -> anyhow::Result<PathBuf> {
+fn timing_scenario(dir: &Path, a: &TimingArgs) -> anyhow::Result<PathBuf> {
     let default = scenario::Scenario::default_file();
     let text = std::fs::read_to_string(&default).with_context(|| format!("reading {}", default.display()))?;
     let mut doc: toml::Table = text.parse().with_context(|| format!("parsing {}", default.display()))?;
@@ -199,7 +206,15 @@ fn timing_scenario(dir: &Path, spin_us: f64) -> anyhow::Result<PathBuf> {
     doc.insert("strip".into(), strip.into());
     let mut lp = table(&mut doc, "loop");
     lp.insert("mode".into(), "realtime".into());
-    lp.insert("spin_wait_us".into(), spin_us.into());
+    if let Some(us) = a.spin_us {
+        lp.insert("spin_wait_us".into(), us.into());
+    }
+    if let Some(us) = a.controller_spin_us {
+        lp.insert("controller_spin_us".into(), us.into());
+    }
+    if a.no_idle_poll {
+        lp.insert("idle_poll".into(), false.into());
+    }
     doc.insert("loop".into(), lp.into());
     let mut tr = table(&mut doc, "trajectory");
     // Hold the start pose for the whole run: the loop's timing, not the task, is under test.
@@ -229,10 +244,15 @@ fn main() {
         Cmd::Timing(a) => (|| {
             anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
             let rig = supervise::unique_rig_name();
-            let dir = a.out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
-            let scenario = match a.scenario {
-                Some(s) => s,
-                None => timing_scenario(&dir, a.spin_us)?,
+            let dir = a.out.clone().unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
+            let scenario = match a.scenario.clone() {
+                Some(s) => {
+                    if a.spin_us.is_some() || a.controller_spin_us.is_some() || a.no_idle_poll {
+                        tracing::warn!("--spin-us/--controller-spin-us/--no-idle-poll apply to the built-in timing scenario only; {} keeps its own [loop] settings", s.display());
+                    }
+                    s
+                }
+                None => timing_scenario(&dir, &a)?,
             };
             let l = prepare(rig, scenario, Some("realtime".into()), Some(a.seconds), Some(dir), a.controller)?;
             launch_and_report(&l, true, a.json.as_deref())

@@ -343,6 +343,13 @@ impl ControllerPorts {
         }
     }
 
+    /// True when a joint state waits in the subscriber. Reads shared memory only (no syscall):
+    /// what a controller busy-polls in the short window around a state's due time, where waking
+    /// from `ppoll` would cost a halted vCPU's wake-up (tens of µs on a VM).
+    pub fn state_pending(&self) -> bool {
+        self.state_sub.has_samples().unwrap_or(false)
+    }
+
     /// Newest joint state (older ones are stale).
     pub fn receive_state(&self) -> Option<JointState> {
         newest(&self.state_sub)

@@ -165,6 +165,12 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
             tracing::warn!("could not pin the lockstep loop to CPU {cpu}");
         }
     }
+    if mode == Mode::Realtime && l.idle_poll {
+        match rt::hold_idle_poll() {
+            Ok(()) => tracing::info!("idle CPUs poll while the plant runs (PM QoS /dev/cpu_dma_latency = 0 µs; loop.idle_poll)"),
+            Err(e) => tracing::warn!("could not hold /dev/cpu_dma_latency at 0 µs ({e}): idle CPUs may halt, wake-ups cost more"),
+        }
+    }
     if (mode == Mode::Realtime && !rt_setup.sched_fifo) || !rt_setup.mlockall {
         tracing::warn!(
             "real-time set-up incomplete: SCHED_FIFO {}, mlockall {} (needs CAP_SYS_NICE/rtprio and memlock limits); running best-effort",

@@ -88,6 +88,14 @@ pub struct LoopConfig {
     /// Real-time mode: the plant busy-polls for the torque this long after publishing before it
     /// sleeps on the event, µs (0 = never spin). Trades CPU for wake-up latency on VMs.
     pub spin_wait_us: f64,
+    /// Real-time mode: the controller busy-polls for the next state from this long before it is
+    /// due until this long after, µs (0 = always sleep on the event). Costs up to twice this much
+    /// CPU per tick; saves the controller's wake-up from the round trip.
+    pub controller_spin_us: f64,
+    /// Real-time mode: while the plant runs, hold the kernel's PM QoS CPU latency request at 0
+    /// (`/dev/cpu_dma_latency`, as cyclictest does) so idle CPUs poll instead of halting and wake
+    /// at once. Needs root; refused requests are logged and the run goes on.
+    pub idle_poll: bool,
 }
 
 impl Default for LoopConfig {
@@ -103,6 +111,8 @@ impl Default for LoopConfig {
             safe_stop_damping_nms: 20.0,
             takeover_blend_s: 0.05,
             spin_wait_us: 0.0,
+            controller_spin_us: 0.0,
+            idle_poll: true,
         }
     }
 }
@@ -380,6 +390,9 @@ impl Scenario {
         }
         if !(l.spin_wait_us >= 0.0 && l.spin_wait_us <= l.torque_budget_us) {
             return Err(bad("loop.spin_wait_us", l.spin_wait_us, "must be in [0, loop.torque_budget_us]"));
+        }
+        if !(l.controller_spin_us >= 0.0 && l.controller_spin_us < 0.5 * l.period_s * 1e6) {
+            return Err(bad("loop.controller_spin_us", l.controller_spin_us, "must be in [0, half the period)"));
         }
         if l.max_consecutive_misses == 0 {
             return Err(bad("loop.max_consecutive_misses", 0.0, "must be at least 1"));
