@@ -130,7 +130,8 @@ fn prepare(
         }
         None => supervise::sibling_binary("controller")?,
     };
-    let cache_dir = plant_bin.parent().map_or_else(|| PathBuf::from("strip-cache"), |d| d.join("strip-cache"));
+    // The one strip-model cache `rig model build` fills too.
+    let cache_dir = strip::cache::cache_dir();
     Ok(RigLaunch {
         rig,
         scenario,

@@ -25,18 +25,11 @@ struct Args {
     /// MCAP recording path (default runs/<time>-<rig>/run.mcap).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Cache directory for reduced strip models (default: `strip-cache/` next to this executable).
+    /// Cache directory for reduced strip models (default: `strip::cache::cache_dir()`, the one
+    /// `rig model build` fills: `$RIG_CACHE_DIR/strip`, else `target/strip-cache` in a checkout,
+    /// else `~/.cache/rig/strip`).
     #[arg(long)]
     cache_dir: Option<PathBuf>,
-}
-
-/// `strip-cache/` beside the executable (target/release/strip-cache in a checkout), shared by
-/// `rig`, the tests and hand-started plants.
-fn default_cache_dir() -> PathBuf {
-    std::env::current_exe()
-        .ok()
-        .and_then(|p| p.parent().map(|d| d.join("strip-cache")))
-        .unwrap_or_else(|| PathBuf::from("strip-cache"))
 }
 
 fn main() {
@@ -52,7 +45,7 @@ fn main() {
         mode: a.mode,
         duration_s: a.duration,
         out: a.out,
-        cache_dir: a.cache_dir.unwrap_or_else(default_cache_dir),
+        cache_dir: a.cache_dir.unwrap_or_else(strip::cache::cache_dir),
     };
     match plant_sim::run::run(&opts) {
         Ok(summary) => {
