@@ -279,12 +279,13 @@ impl PlantLoop<'_> {
             // 1. The deadline of this tick (paced modes), skipping ahead after a stall.
             let deadline_ns = if paced {
                 let now = rt::now_mono_ns();
-                if now > next_deadline_ns + p.period_ns {
-                    let skipped = (now - next_deadline_ns) / p.period_ns;
-                    next_deadline_ns += skipped * p.period_ns;
+                let (deadline, skipped) = skip_ahead(now, next_deadline_ns, p.period_ns);
+                if skipped > 0 {
+                    let late_us = (now - next_deadline_ns) / 1000;
+                    next_deadline_ns = deadline;
                     stats.overruns += skipped;
                     let mut s = StackText::new();
-                    let _ = write!(s, "tick {tick}: loop {} us late, skipped {skipped} periods", (now - next_deadline_ns + skipped * p.period_ns) / 1000);
+                    let _ = write!(s, "tick {tick}: loop {late_us} us late, skipped {skipped} periods");
                     tracing::warn!("{}", s.as_str());
                     self.event(tick, sim_t, EventKind::Info, s.as_str());
                 }
@@ -433,3 +434,51 @@ impl PlantLoop<'_> {
 }
 
 const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics::zeroed(0);
+
+/// The deadline to run next after waking at `now_ns` for `next_deadline_ns`, and the number of
+/// whole periods skipped. Up to one period late, the tick runs late and the next ones catch up
+/// on the grid; later than that (a VM stall), the missed deadlines are dropped so the loop lands
+/// on the grid slot just before `now` instead of running a burst of back-to-back ticks.
+fn skip_ahead(now_ns: u64, next_deadline_ns: u64, period_ns: u64) -> (u64, u64) {
+    if now_ns > next_deadline_ns + period_ns {
+        let skipped = (now_ns - next_deadline_ns) / period_ns;
+        (next_deadline_ns + skipped * period_ns, skipped)
+    } else {
+        (next_deadline_ns, 0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::skip_ahead;
+
+    const T: u64 = 1_000_000;
+
+    #[test]
+    fn on_time_and_slightly_late_ticks_keep_their_deadline() {
+        let d = 5 * T;
+        assert_eq!(skip_ahead(d - 300_000, d, T), (d, 0));
+        assert_eq!(skip_ahead(d + 999_999, d, T), (d, 0));
+        assert_eq!(skip_ahead(d + T, d, T), (d, 0));
+    }
+
+    #[test]
+    fn a_stall_skips_whole_periods_and_lands_on_the_grid_before_now() {
+        let d = 7 * T + 123; // grid phase 123 ns
+        // 3.4 periods late: 3 deadlines dropped, the next one is 0.4 periods in the past.
+        let (d2, k) = skip_ahead(d + 3_400_000, d, T);
+        assert_eq!((d2, k), (d + 3 * T, 3));
+        // Any lateness beyond a period: on the grid, not after now, less than a period before it.
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        for _ in 0..10_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let late = T + 1 + x % (50 * T);
+            let (d2, k) = skip_ahead(d + late, d, T);
+            assert_eq!((d2 - d) % T, 0);
+            assert_eq!(d2, d + k * T);
+            assert!(k >= 1 && d2 <= d + late && d + late - d2 < T, "late {late}: deadline {d2}, skipped {k}");
+        }
+    }
+}
