@@ -1,5 +1,6 @@
-//! Cost of one plant tick (robot only): `loop.substeps` RK4 steps of the forward dynamics. The
-//! lockstep speed target (20x real time) leaves ~50 µs per tick for plant + controller + IPC.
+//! Cost of one plant tick: `loop.substeps` RK4 steps of the forward dynamics, robot only and with
+//! the strip contact (default scenario), plus the once-per-tick strip record. The lockstep speed
+//! target (20x real time) leaves ~50 µs per tick for plant + controller + IPC.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use plant_sim::physics::Physics;
@@ -19,6 +20,17 @@ fn step_tick(c: &mut Criterion) {
     let (q, qd) = (p.q(), p.qd());
     let tau = p.gravity_torque();
     c.bench_function("robot.forward_dynamics", |b| b.iter(|| robot.forward_dynamics(std::hint::black_box(&q), &qd, &tau)));
+
+    let s = scenario::Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/default.toml")).unwrap();
+    let mut p = Physics::new(&s, &strip::cache::cache_dir()).unwrap();
+    c.bench_function("physics.step_tick (default scenario, with strip)", |b| {
+        b.iter(|| {
+            let tau = p.gravity_torque();
+            p.step_tick(std::hint::black_box(&tau));
+        })
+    });
+    let mut r = recordings::StripRecord::default();
+    c.bench_function("physics.fill_strip_record (default scenario)", |b| b.iter(|| p.fill_strip_record(std::hint::black_box(&mut r))));
 }
 
 criterion_group!(benches, step_tick);

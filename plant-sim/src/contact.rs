@@ -18,6 +18,11 @@
 //! Speed: the wheel direction enters only through wᵀ C_top, V⁻¹ B w, wᵀ D w and D_bottom w. These
 //! are linear in w, so they are tabulated once on a fine z_a grid (0.05 mm; linear interpolation
 //! of the Gaussian is exact to ~1e-4 relative and still sums to 1) and each substep costs O(modes).
+//! The table holds γ V⁻¹ B w (h is fixed per contact), and since the compliance d_h is bilinear in
+//! the interpolated rows, Σ Re(c γ b) is tabulated too as the quadratic in the interpolation
+//! fraction it is (per grid point and per interval), so d_h costs O(1). Complex rows are stored
+//! real: `[Re c, −Im c]` against the state `[Re x, Im x]`, so Re(c x) is one real dot product
+//! (8 independent partial sums in a fixed order: vectorized, and still bit-reproducible).
 //! Nothing allocates after construction.
 
 use nalgebra::{Matrix3, Vector3};
@@ -81,15 +86,20 @@ impl ContactGeometry {
 }
 
 /// Wheel-direction quantities tabulated over z_a (see the module docs), flattened grid-major.
+/// A "real row" of a complex vector v over the modes is `[Re v, Im v]` (2 × modes values); a
+/// row multiplied with a state real row as `[Re c, −Im c] · [Re x, Im x]` gives Re(c x).
 struct WheelTable {
     z0_m: f64,
     n: usize,
-    /// V⁻¹ B w (re, im), [g * modes + k].
-    b_re: Vec<f64>,
-    b_im: Vec<f64>,
-    /// wᵀ C_top V (weighted), [g * modes + k].
-    c_re: Vec<f64>,
-    c_im: Vec<f64>,
+    /// γ V⁻¹ B w as real rows `[Re, Im]`, [g * 2 modes ..].
+    gb: Vec<f64>,
+    /// wᵀ C_top V (weighted) as real rows `[Re, −Im]`, [g * 2 modes ..].
+    c: Vec<f64>,
+    /// Σ_k Re(c_k γ b_k) at grid point g, and Σ_k Re(c_k(g) γ b_k(g+1) + c_k(g+1) γ b_k(g)) of
+    /// interval g: the one-substep compliance between grid points is
+    /// (1−s)² p(g) + s(1−s) x(g) + s² p(g+1) exactly (bilinear in the interpolated rows).
+    cgb_point: Vec<f64>,
+    cgb_cross: Vec<f64>,
     /// wᵀ D_top w, Σ_bottom D w, wᵀ u_bulge per grid point.
     d_ww: Vec<f64>,
     d_sum: Vec<f64>,
@@ -98,8 +108,46 @@ struct WheelTable {
     d_cl: Vec<f64>,
 }
 
+/// Real dot product with 8 independent partial sums combined in a fixed order: vectorized (AVX2
+/// where the CPU has it), and the result does not depend on the vector width (no FMA, same
+/// order of operations), so runs stay bit-reproducible across the two code paths.
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { dot_avx2(a, b) };
+    }
+    dot_portable(a, b)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn dot_avx2(a: &[f64], b: &[f64]) -> f64 {
+    dot_portable(a, b)
+}
+
+#[inline(always)]
+fn dot_portable(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0f64; 8];
+    let (ac, bc) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ar, br) = (ac.remainder(), bc.remainder());
+    for (x, y) in ac.zip(bc) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    for (l, (x, y)) in ar.iter().zip(br).enumerate() {
+        acc[l] += x * y;
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
+}
+
 impl WheelTable {
-    fn build(model: &StripModel, cl_rows: &[usize]) -> WheelTable {
+    /// Table for `model` with the substep's ZOH factors γ = (e^{λh} − 1)/λ per mode.
+    fn build(model: &StripModel, cl_rows: &[usize], g_re: &[f64], g_im: &[f64]) -> WheelTable {
         let mf = &model.modal;
         let modes = mf.modes();
         let n_top = model.n_top();
@@ -107,13 +155,14 @@ impl WheelTable {
         let n_cl = cl_rows.len();
         let length = model.params.length_m;
         let n = (length / TABLE_STEP_M).round() as usize + 1;
+        let row = 2 * modes;
         let mut t = WheelTable {
             z0_m: 0.0,
             n,
-            b_re: vec![0.0; n * modes],
-            b_im: vec![0.0; n * modes],
-            c_re: vec![0.0; n * modes],
-            c_im: vec![0.0; n * modes],
+            gb: vec![0.0; n * row],
+            c: vec![0.0; n * row],
+            cgb_point: vec![0.0; n],
+            cgb_cross: vec![0.0; n],
             d_ww: vec![0.0; n],
             d_sum: vec![0.0; n],
             bulge_w: vec![0.0; n],
@@ -123,23 +172,30 @@ impl WheelTable {
         let d_colsum: Vec<f64> = (0..n_top).map(|j| (0..n_bottom).map(|r| model.d[(n_top + r, j)]).sum()).collect();
         let mut w = vec![0.0; n_top];
         let mut dw = vec![0.0; n_top];
+        let (mut b_re, mut b_im) = (vec![0.0; modes], vec![0.0; modes]);
         for g in 0..n {
             let z = t.z0_m + g as f64 * TABLE_STEP_M;
             model.gaussian_weights(z, &mut w);
             let wmax = w.iter().cloned().fold(0.0, f64::max);
             let nz: Vec<usize> = (0..n_top).filter(|&j| w[j] > 1e-15 * wmax).collect();
-            let (br, bi) = (&mut t.b_re[g * modes..(g + 1) * modes], &mut t.b_im[g * modes..(g + 1) * modes]);
-            let (cr, ci) = (&mut t.c_re[g * modes..(g + 1) * modes], &mut t.c_im[g * modes..(g + 1) * modes]);
+            b_re.fill(0.0);
+            b_im.fill(0.0);
+            let c = &mut t.c[g * row..(g + 1) * row];
             for &j in &nz {
                 let wj = w[j];
                 for k in 0..modes {
                     let b = mf.b[j * modes + k];
-                    br[k] += b.re * wj;
-                    bi[k] += b.im * wj;
-                    let c = mf.c[j * modes + k];
-                    cr[k] += c.re * wj;
-                    ci[k] += c.im * wj;
+                    b_re[k] += b.re * wj;
+                    b_im[k] += b.im * wj;
+                    let cc = mf.c[j * modes + k];
+                    c[k] += cc.re * wj;
+                    c[modes + k] -= cc.im * wj;
                 }
+            }
+            let gb = &mut t.gb[g * row..(g + 1) * row];
+            for k in 0..modes {
+                gb[k] = g_re[k] * b_re[k] - g_im[k] * b_im[k];
+                gb[modes + k] = g_re[k] * b_im[k] + g_im[k] * b_re[k];
             }
             for i in 0..n_top {
                 dw[i] = nz.iter().map(|&j| model.d[(i, j)] * w[j]).sum();
@@ -151,7 +207,25 @@ impl WheelTable {
                 t.d_cl[g * n_cl + c] = nz.iter().map(|&j| model.d[(row, j)] * w[j]).sum();
             }
         }
+        for g in 0..n {
+            t.cgb_point[g] = dot(t.c_row(g), t.gb_row(g));
+            if g + 1 < n {
+                t.cgb_cross[g] = dot(t.c_row(g), t.gb_row(g + 1)) + dot(t.c_row(g + 1), t.gb_row(g));
+            }
+        }
         t
+    }
+
+    #[inline]
+    fn c_row(&self, g: usize) -> &[f64] {
+        let row = self.c.len() / self.n;
+        &self.c[g * row..(g + 1) * row]
+    }
+
+    #[inline]
+    fn gb_row(&self, g: usize) -> &[f64] {
+        let row = self.gb.len() / self.n;
+        &self.gb[g * row..(g + 1) * row]
     }
 
     /// Grid index and interpolation fraction of z (clamped to the strip).
@@ -185,26 +259,21 @@ pub struct StripContact {
     table: WheelTable,
     h_s: f64,
     modes: usize,
-    /// e^{λh} and γ = (e^{λh} − 1)/λ per mode (re, im).
+    /// e^{λh} per mode (re, im).
     z_re: Vec<f64>,
     z_im: Vec<f64>,
-    g_re: Vec<f64>,
-    g_im: Vec<f64>,
-    /// Modal state (re, im).
-    x_re: Vec<f64>,
-    x_im: Vec<f64>,
-    /// Σ_bottom C V (weighted) per mode: total bottom reaction from the state.
-    csum_re: Vec<f64>,
-    csum_im: Vec<f64>,
+    /// Modal state as a real row `[Re x, Im x]`.
+    x: Vec<f64>,
+    /// Σ_bottom C V (weighted) as a real row `[Re, −Im]`: total bottom reaction from the state.
+    csum: Vec<f64>,
     /// Bottom output rows of the centre line, their z, tributary area and bulge reaction.
     cl_rows: Vec<usize>,
     cl_z_m: Vec<f64>,
     cl_area_m2: Vec<f64>,
     cl_bulge_n: Vec<f64>,
     bulge_sum_n: f64,
-    /// Output rows of C (weighted) for the centre line, [c * modes + k].
-    ccl_re: Vec<f64>,
-    ccl_im: Vec<f64>,
+    /// Output rows of C (weighted) for the centre line, real rows `[Re, −Im]`, [c * 2 modes ..].
+    ccl: Vec<f64>,
     // Last substep's results.
     z_a_m: f64,
     delta_prev_m: f64,
@@ -237,26 +306,24 @@ impl StripContact {
             g_im[k] = (ni * lr - nr * li) / den;
         }
         let n_bottom = model.n_bottom();
-        let mut csum_re = vec![0.0; modes];
-        let mut csum_im = vec![0.0; modes];
+        let mut csum = vec![0.0; 2 * modes];
         for r in 0..n_bottom {
             for k in 0..modes {
                 let c = mf.c[(n_top + r) * modes + k];
-                csum_re[k] += c.re;
-                csum_im[k] += c.im;
+                csum[k] += c.re;
+                csum[modes + k] -= c.im;
             }
         }
         let cl: Vec<(usize, f64, f64)> = model.centre_line().take(MAX_CENTRELINE).collect();
         let cl_rows: Vec<usize> = cl.iter().map(|&(i, _, _)| n_top + i).collect();
-        let mut ccl_re = vec![0.0; cl.len() * modes];
-        let mut ccl_im = vec![0.0; cl.len() * modes];
+        let mut ccl = vec![0.0; cl.len() * 2 * modes];
         for (c, &row) in cl_rows.iter().enumerate() {
             for k in 0..modes {
-                ccl_re[c * modes + k] = mf.c[row * modes + k].re;
-                ccl_im[c * modes + k] = mf.c[row * modes + k].im;
+                ccl[c * 2 * modes + k] = mf.c[row * modes + k].re;
+                ccl[c * 2 * modes + modes + k] = -mf.c[row * modes + k].im;
             }
         }
-        let table = WheelTable::build(model, &cl_rows);
+        let table = WheelTable::build(model, &cl_rows, &g_re, &g_im);
         StripContact {
             geo,
             table,
@@ -264,19 +331,14 @@ impl StripContact {
             modes,
             z_re,
             z_im,
-            g_re,
-            g_im,
-            x_re: vec![0.0; modes],
-            x_im: vec![0.0; modes],
-            csum_re,
-            csum_im,
+            x: vec![0.0; 2 * modes],
+            csum,
             cl_z_m: cl.iter().map(|&(_, z, _)| z).collect(),
             cl_area_m2: cl.iter().map(|&(_, _, a)| a).collect(),
             cl_bulge_n: cl.iter().map(|&(i, _, _)| model.bulge_bottom_reaction_n[i]).collect(),
             bulge_sum_n: model.bulge_bottom_reaction_n.iter().sum(),
             cl_rows,
-            ccl_re,
-            ccl_im,
+            ccl,
             z_a_m: 0.0,
             delta_prev_m: f64::NEG_INFINITY,
             force_y_n: 0.0,
@@ -321,21 +383,18 @@ impl StripContact {
 
         let t = &self.table;
         let (g, s) = t.locate(self.z_a_m);
-        let (m, i0, i1) = (self.modes, g * self.modes, (g + 1) * self.modes);
-        let lerp = |a: &[f64], i: usize, j: usize| (1.0 - s) * a[i] + s * a[j];
-        // Free surface displacement at the substep end and one-substep compliance.
-        let mut u_free = 0.0;
-        let mut d_h = lerp(&t.d_ww, g, g + 1);
-        for k in 0..m {
-            let (cr, ci) = (lerp(&t.c_re, i0 + k, i1 + k), lerp(&t.c_im, i0 + k, i1 + k));
-            let (br, bi) = (lerp(&t.b_re, i0 + k, i1 + k), lerp(&t.b_im, i0 + k, i1 + k));
-            let (xr, xi) = (self.x_re[k], self.x_im[k]);
-            let (zxr, zxi) = (self.z_re[k] * xr - self.z_im[k] * xi, self.z_re[k] * xi + self.z_im[k] * xr);
-            u_free += cr * zxr - ci * zxi;
-            let (gbr, gbi) = (self.g_re[k] * br - self.g_im[k] * bi, self.g_re[k] * bi + self.g_im[k] * br);
-            d_h += cr * gbr - ci * gbi;
+        let lerp = |a: &[f64]| (1.0 - s) * a[g] + s * a[g + 1];
+        // Free strip state at the substep end, Z x, in place; the surface under the wheel is
+        // linear in the interpolated row, so it interpolates the two grid rows' outputs.
+        let m = self.modes;
+        let (x_re, x_im) = self.x.split_at_mut(m);
+        for (((xr, xi), zr), zi) in x_re.iter_mut().zip(x_im.iter_mut()).zip(&self.z_re).zip(&self.z_im) {
+            (*xr, *xi) = (zr * *xr - zi * *xi, zr * *xi + zi * *xr);
         }
-        let surface = STRIP_TOP_HEIGHT_M + lerp(&t.bulge_w, g, g + 1) + u_free;
+        let u_free = (1.0 - s) * dot(t.c_row(g), &self.x) + s * dot(t.c_row(g + 1), &self.x);
+        // One-substep compliance under the wheel (the tabulated quadratic in s).
+        let d_h = lerp(&t.d_ww) + (1.0 - s) * (1.0 - s) * t.cgb_point[g] + s * (1.0 - s) * t.cgb_cross[g] + s * s * t.cgb_point[g + 1];
+        let surface = STRIP_TOP_HEIGHT_M + lerp(&t.bulge_w) + u_free;
         let delta0 = surface - y_wheel_end;
         let (k_c, c_c) = (self.geo.stiffness_n_per_m, self.geo.damping_ns_per_m);
         let delta_prev = if self.delta_prev_m.is_finite() { self.delta_prev_m } else { delta0 };
@@ -344,13 +403,12 @@ impl StripContact {
         self.delta_prev_m = delta0 - d_h * p;
         let f = -p;
         self.force_y_n = f;
-        // Step the strip: x ← Z x + γ (V⁻¹ B w) f.
-        for k in 0..m {
-            let (br, bi) = (lerp(&t.b_re, i0 + k, i1 + k), lerp(&t.b_im, i0 + k, i1 + k));
-            let (xr, xi) = (self.x_re[k], self.x_im[k]);
-            let (gbr, gbi) = (self.g_re[k] * br - self.g_im[k] * bi, self.g_re[k] * bi + self.g_im[k] * br);
-            self.x_re[k] = self.z_re[k] * xr - self.z_im[k] * xi + gbr * f;
-            self.x_im[k] = self.z_re[k] * xi + self.z_im[k] * xr + gbi * f;
+        // Step the strip: x ← Z x + γ (V⁻¹ B w) f (Z x is already in place).
+        if p > 0.0 {
+            let (a0, a1) = ((1.0 - s) * f, s * f);
+            for ((x, b0), b1) in self.x.iter_mut().zip(t.gb_row(g)).zip(t.gb_row(g + 1)) {
+                *x += a0 * b0 + a1 * b1;
+            }
         }
         // The wheel gets +p along base z at its lowest point.
         let force = Vector3::new(0.0, 0.0, p);
@@ -385,30 +443,21 @@ impl StripContact {
     pub fn fill_record(&self, r: &mut StripRecord) {
         let t = &self.table;
         let (g, s) = t.locate(self.z_a_m);
-        let lerp = |a: &[f64], i: usize, j: usize| (1.0 - s) * a[i] + s * a[j];
-        let (m, f) = (self.modes, self.force_y_n);
-        let dot = |cr: &[f64], ci: &[f64]| -> f64 {
-            cr.iter().zip(ci).zip(self.x_re.iter().zip(&self.x_im)).map(|((a, b), (x, y))| a * x - b * y).sum()
-        };
+        let lerp = |a: &[f64]| (1.0 - s) * a[g] + s * a[g + 1];
+        let (m2, f, x) = (2 * self.modes, self.force_y_n, &self.x[..]);
         // Top displacement under the wheel (dynamic + bulge), total bottom reaction.
-        let (i0, i1) = (g * m, (g + 1) * m);
-        let mut u_w = lerp(&t.d_ww, g, g + 1) * f + lerp(&t.bulge_w, g, g + 1);
-        for k in 0..m {
-            let (cr, ci) = (lerp(&t.c_re, i0 + k, i1 + k), lerp(&t.c_im, i0 + k, i1 + k));
-            u_w += cr * self.x_re[k] - ci * self.x_im[k];
-        }
-        let reaction_sum = dot(&self.csum_re, &self.csum_im) + lerp(&t.d_sum, g, g + 1) * f + self.bulge_sum_n;
+        let u_w = lerp(&t.d_ww) * f + lerp(&t.bulge_w) + ((1.0 - s) * dot(t.c_row(g), x) + s * dot(t.c_row(g + 1), x));
+        let reaction_sum = dot(&self.csum, x) + lerp(&t.d_sum) * f + self.bulge_sum_n;
         r.wheel_z_m = self.z_a_m;
         r.contact_force_n = f;
         // Force of the strip on the substrate along +y (thesis sign: −10 N when pressing 10 N).
         r.bottom_force_n = -reaction_sum;
         r.top_displacement_m = u_w;
         let n_cl = self.cl_rows.len();
+        let (d0, d1) = (&t.d_cl[g * n_cl..(g + 1) * n_cl], &t.d_cl[(g + 1) * n_cl..(g + 2) * n_cl]);
         let mut pmax = f64::NEG_INFINITY;
         for c in 0..n_cl {
-            let reaction = dot(&self.ccl_re[c * m..(c + 1) * m], &self.ccl_im[c * m..(c + 1) * m])
-                + lerp(&t.d_cl, g * n_cl + c, (g + 1) * n_cl + c) * f
-                + self.cl_bulge_n[c];
+            let reaction = dot(&self.ccl[c * m2..(c + 1) * m2], x) + ((1.0 - s) * d0[c] + s * d1[c]) * f + self.cl_bulge_n[c];
             let p = reaction / self.cl_area_m2[c];
             r.centreline_pressure_pa[c] = p;
             pmax = pmax.max(p);
