@@ -239,9 +239,64 @@ fn cholesky_factor(p: &Mat<f64>, what: &'static str) -> Result<Mat<f64>> {
     Err(numeric("balanced truncation", format!("{what} Gramian is not positive definite")))
 }
 
+/// Leading singular triplets of the square-root product Z = L_o^T L_c, without forming L_o.
+/// Returns all singular values (descending), L_c V_r and W_r = U_r^T L_o^T (r x n), i.e. the
+/// two halves of the balancing transformations restricted to the kept states.
+///
+/// Main route: Z^T Z = L_c^T Q L_c (two triangular products), its symmetric eigenproblem gives
+/// s^2 and V, and U_r^T L_o^T = S_r^-1 V_r^T L_c^T L_o L_o^T = S_r^-1 (L_c V_r)^T Q. Squaring
+/// the condition number is accepted only while s_min / s_max > 1e-4 (as in [`hankel_svd`]);
+/// otherwise L_o is factored and Z decomposed by [`hankel_svd`].
+fn hankel_leading(lc: &Mat<f64>, q: &Mat<f64>, r: usize) -> Result<(Vec<f64>, Mat<f64>, Mat<f64>)> {
+    use faer::linalg::matmul::triangular::{matmul as tri_matmul, BlockStructure as Bs};
+    use faer::Accum;
+    let n = lc.nrows();
+    let par = faer::get_global_parallelism();
+    let lc_v = |v: MatRef<'_, f64>| {
+        let mut out = Mat::<f64>::zeros(n, v.ncols());
+        tri_matmul(out.as_mut(), Bs::Rectangular, Accum::Replace, lc.as_ref(), Bs::TriangularLower, v, Bs::Rectangular, 1.0, par);
+        out
+    };
+    let mut q_lc = Mat::<f64>::zeros(n, n);
+    tri_matmul(q_lc.as_mut(), Bs::Rectangular, Accum::Replace, q.as_ref(), Bs::Rectangular, lc.as_ref(), Bs::TriangularLower, 1.0, par);
+    let mut ztz = Mat::<f64>::zeros(n, n); // lower half of L_c^T Q L_c
+    tri_matmul(ztz.as_mut(), Bs::TriangularLower, Accum::Replace, lc.transpose(), Bs::TriangularUpper, q_lc.as_ref(), Bs::Rectangular, 1.0, par);
+    drop(q_lc);
+    if let Ok(evd) = ztz.self_adjoint_eigen(Side::Lower) {
+        let ev = evd.S().column_vector();
+        let (lmax, lmin) = (ev[n - 1], ev[0]);
+        if lmax > 0.0 && lmin > 1e-8 * lmax {
+            let sig: Vec<f64> = (0..n).rev().map(|k| ev[k].sqrt()).collect();
+            let v_r = Mat::from_fn(n, r, |i, j| evd.U()[(i, n - 1 - j)]);
+            let lcv = lc_v(v_r.as_ref());
+            let mut w_r = lcv.transpose() * q;
+            for i in 0..r {
+                let f = 1.0 / sig[i];
+                w_r.row_mut(i).iter_mut().for_each(|x| *x *= f);
+            }
+            return Ok((sig, lcv, w_r));
+        }
+    }
+    let lo = cholesky_factor(q, "observability")?;
+    let z = lo.transpose() * lc;
+    let (u, sig, v) = hankel_svd(&z)?;
+    let lcv = lc_v(v.as_ref().subcols(0, r));
+    let w_r = u.as_ref().subcols(0, r).transpose() * lo.transpose();
+    Ok((sig, lcv, w_r))
+}
+
 /// Square-root balanced truncation with matched DC gain (singular perturbation, 5.31) to `order`
 /// states. `out_weight` scales each output row for the balancing only (so that metres and newtons
 /// weigh alike); the returned C and D are in the original units.
+///
+/// The singular perturbation of a balanced realisation equals the reciprocal of the direct
+/// truncation of the reciprocal system (A^-1, A^-1 B, -C A^-1, G(0)), which has the same Gramians
+/// and hence the same balancing (Liu & Anderson 1989): with T_r, Ti_r the kept columns / rows of
+/// the balancing transformations,
+///   A_r = (Ti_r A^-1 T_r)^-1, B_r = A_r Ti_r A^-1 B, C_r = C A^-1 T_r A_r,
+///   D_r = G(0) + C_r Ti_r A^-1 B,
+/// equal to A11 - A12 A22^-1 A21 etc. of (5.31) by the Schur complement of the inverse. A^-1 is
+/// block-diagonal in the modal basis, so only the r kept directions are ever formed.
 pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) -> Result<Reduced> {
     let n = sys.n_states();
     if order >= n {
@@ -274,79 +329,49 @@ pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) 
     }
     lap("gramians", &mut laps);
     let lc = cholesky_factor(&p, "controllability")?;
-    let lo = cholesky_factor(&q, "observability")?;
-    drop((p, q));
+    drop(p);
     lap("cholesky", &mut laps);
     crate::progress::stage("Hankel SVD");
-    let z = lo.transpose() * &lc;
-    let (u_mat, sig, v_mat) = hankel_svd(&z)?;
-    if !(sig[order - 1] > 0.0) {
+    let r = order;
+    let (sig, lcv, w_r) = hankel_leading(&lc, &q, r)?;
+    drop((lc, q));
+    if !(sig[r - 1] > 0.0) {
         return Err(numeric("balanced truncation", "Hankel singular values vanish before the order"));
     }
     lap("svd", &mut laps);
     crate::progress::stage("matched-DC truncation");
     let floor = sig[0] * 1e-300_f64.max(f64::EPSILON * 1e-4);
-    let isq: Vec<f64> = sig.iter().map(|&s| 1.0 / s.max(floor).sqrt()).collect();
-    // T = Lc V S^-1/2, Tinv = S^-1/2 U^T Lo^T
-    let mut t = &lc * &v_mat;
-    for j in 0..n {
-        let f = isq[j];
-        t.col_mut(j).iter_mut().for_each(|v| *v *= f);
-    }
-    for i in 0..n {
-        let f = sc[i];
-        t.row_mut(i).iter_mut().for_each(|v| *v *= f);
-    }
-    let mut tinv = u_mat.transpose() * lo.transpose();
-    for i in 0..n {
-        let f = isq[i];
-        tinv.row_mut(i).iter_mut().for_each(|v| *v *= f);
-    }
-    for j in 0..n {
-        let f = 1.0 / sc[j];
-        tinv.col_mut(j).iter_mut().for_each(|v| *v *= f);
-    }
+    let isq: Vec<f64> = sig[..r].iter().map(|&s| 1.0 / s.max(floor).sqrt()).collect();
+    // T_r = S L_c V_r S_r^-1/2 (n x r), Ti_r = S_r^-1/2 U_r^T L_o^T S^-1 (r x n)
+    let t_r = Mat::from_fn(n, r, |i, j| lcv[(i, j)] * isq[j] * sc[i]);
+    let ti_r = Mat::from_fn(r, n, |i, j| w_r[(i, j)] * isq[i] / sc[j]);
     lap("transforms", &mut laps);
-    // A_m, B_m, C_m are structured (2x2 blocks, half-zero rows/columns): apply them directly
+    // modal A_i = [[0, 1], [-w^2, -c]]: A_i^-1 = [[-c, -1], [w^2, 0]] / w^2; B_m has rows
+    // 2i + 1 = g_i (so A^-1 B has rows 2i = -g_i / w^2, rows 2i + 1 = 0); C_m has columns 2i = h_i
     let nm = sys.omega2.len();
-    let mut at = Mat::<f64>::zeros(n, n); // A_m T
+    let mut ai_t = Mat::<f64>::zeros(n, r); // A^-1 T_r
     for i in 0..nm {
         let (a, c) = (sys.omega2[i], sys.damp[i]);
-        for j in 0..n {
-            let (t0, t1) = (t[(2 * i, j)], t[(2 * i + 1, j)]);
-            at[(2 * i, j)] = t1;
-            at[(2 * i + 1, j)] = -a * t0 - c * t1;
+        for j in 0..r {
+            let (t0, t1) = (t_r[(2 * i, j)], t_r[(2 * i + 1, j)]);
+            ai_t[(2 * i, j)] = (-c * t0 - t1) / a;
+            ai_t[(2 * i + 1, j)] = t0;
         }
     }
-    let abal = &tinv * &at;
-    // B_m has rows 2i + 1 = g_i; C_m has columns 2i = h_i
-    let tinv_odd = Mat::from_fn(n, nm, |i, k| tinv[(i, 2 * k + 1)]);
-    let bbal = &tinv_odd * &sys.g;
-    let t_even = Mat::from_fn(nm, n, |k, j| t[(2 * k, j)]);
-    let cbal = &sys.h * &t_even;
-    let r = order;
-    let n2 = n - r;
-    let a11 = abal.as_ref().submatrix(0, 0, r, r);
-    let a12 = abal.as_ref().submatrix(0, r, r, n2);
-    let a21 = abal.as_ref().submatrix(r, 0, n2, r);
-    let a22 = abal.as_ref().submatrix(r, r, n2, n2);
-    let b1 = bbal.as_ref().submatrix(0, 0, r, bbal.ncols());
-    let b2 = bbal.as_ref().submatrix(r, 0, n2, bbal.ncols());
-    let c1 = cbal.as_ref().submatrix(0, 0, cbal.nrows(), r);
-    let c2 = cbal.as_ref().submatrix(0, r, cbal.nrows(), n2);
-    lap("balanced_realisation", &mut laps);
-    let lu = a22.partial_piv_lu();
-    let mut x21 = a21.to_owned();
-    lu.solve_in_place(x21.as_mut()); // A22^-1 A21
-    let mut x2b = b2.to_owned();
-    lu.solve_in_place(x2b.as_mut()); // A22^-1 B2
-    let a = a11 - a12 * &x21;
-    let b = b1 - a12 * &x2b;
-    let c = c1 - c2 * &x21;
-    let mut d = -(c2 * &x2b);
+    let a_hat = &ti_r * &ai_t; // Ti_r A^-1 T_r
+    let ti_even = Mat::from_fn(r, nm, |i, k| ti_r[(i, 2 * k)]);
+    let ai_g = Mat::from_fn(nm, sys.g.ncols(), |k, j| -sys.g[(k, j)] / sys.omega2[k]);
+    let b_hat = &ti_even * &ai_g; // Ti_r A^-1 B
+    let ai_t_even = Mat::from_fn(nm, r, |k, j| ai_t[(2 * k, j)]);
+    let c_hat = &sys.h * &ai_t_even; // C A^-1 T_r
+    use faer::linalg::solvers::DenseSolveCore;
+    let a = a_hat.partial_piv_lu().inverse();
+    let b = &a * &b_hat;
+    let c = &c_hat * &a;
+    let g_full = sys.dc_gain();
+    let mut d = &g_full + &c * &b_hat;
     // Matched DC holds exactly in exact arithmetic; remove the rounding residue (recorded) so the
     // reduced static gain equals the CB one to solver precision.
-    let g_full = sys.dc_gain();
     let mut ainv_b = b.clone();
     a.partial_piv_lu().solve_in_place(ainv_b.as_mut());
     let g_red = &d - &c * &ainv_b;

@@ -3,6 +3,7 @@
 //! cut-off frequency. T_CB = [[I, 0], [Psi, Phi]] (5.19); K_CB = diag(K_bb^S, Omega^2),
 //! M_CB = T^T M T (5.16)-(5.17).
 
+use faer::reborrow::ReborrowMut;
 use faer::Mat;
 
 use crate::eig::{lowest_modes, Want};
@@ -60,6 +61,40 @@ fn par_mul_dense(a: &Csc, x: faer::MatRef<'_, f64>) -> Mat<f64> {
     y.as_mut().subcols_mut(0, h).copy_from(&l);
     y.as_mut().subcols_mut(h, k - h).copy_from(&r);
     y
+}
+
+/// A^T B for a symmetric result (A^T B = B^T A, e.g. Psi^T (M Psi)): only the lower half is
+/// multiplied, then mirrored.
+fn sym_product(a: faer::MatRef<'_, f64>, b: faer::MatRef<'_, f64>) -> Mat<f64> {
+    use faer::linalg::matmul::triangular::{matmul, BlockStructure as Bs};
+    let n = a.ncols();
+    let mut c = Mat::<f64>::zeros(n, n);
+    let par = faer::get_global_parallelism();
+    matmul(c.as_mut(), Bs::TriangularLower, faer::Accum::Replace, a.transpose(), Bs::Rectangular, b, Bs::Rectangular, 1.0, par);
+    for j in 0..n {
+        for i in 0..j {
+            c[(i, j)] = c[(j, i)];
+        }
+    }
+    c
+}
+
+/// Columns per chunk of the constraint-mode solve (a chunk's right-hand sides and the solver's
+/// workspace stay cache-friendly; measured faster per column than one 533-column block).
+const PSI_CHUNK: usize = 64;
+
+/// Splits `x` into column chunks of at most `width` (last chunk first out of `pop`).
+fn column_chunks(x: faer::MatMut<'_, f64>, width: usize) -> Vec<faer::MatMut<'_, f64>> {
+    let mut out = Vec::new();
+    let mut rest = x;
+    while rest.ncols() > width {
+        let (head, tail) = rest.split_at_col_mut(width);
+        out.push(head);
+        rest = tail;
+    }
+    out.push(rest);
+    out.reverse();
+    out
 }
 
 fn sparse_t_dense(a: &Csc, x: faer::MatRef<'_, f64>) -> Mat<f64> {
@@ -120,18 +155,31 @@ impl CraigBampton {
         let chol = Cholesky::new(&k_ii, "Craig-Bampton K_ii factorisation")?;
         lap("factorisation", &mut timings);
         crate::progress::stage("constraint modes and fixed-interface modes");
-        // Both only read the factor: the many-right-hand-side solve for Psi and the
-        // single-vector Lanczos run side by side (each is memory-bound).
+        // Both only read the factor: the single-vector Lanczos run (sequential, memory-bound) on
+        // one thread, the many-right-hand-side solve for Psi in column chunks shared by both
+        // threads (the Lanczos thread joins in when its eigenpairs have converged).
         let lmax = (2.0 * std::f64::consts::PI * p.cb_cutoff_hz).powi(2);
-        let (psi, modes) = std::thread::scope(|scope| {
-            let lanczos = scope.spawn(|| lowest_modes(&chol, &k_ii, &m_ii, Want::Below(lmax)));
-            let mut psi = k_ib.to_dense();
-            chol.solve_in_place(psi.as_mut());
-            for j in 0..psi.ncols() {
-                psi.col_mut(j).iter_mut().for_each(|v| *v = -*v);
-            }
-            (psi, lanczos.join().expect("Lanczos thread panicked"))
-        });
+        let mut psi = k_ib.to_dense();
+        let modes = {
+            let chunks = std::sync::Mutex::new(column_chunks(psi.as_mut(), PSI_CHUNK));
+            let solve_chunks = || loop {
+                let next = chunks.lock().expect("chunk queue poisoned").pop();
+                let Some(mut x) = next else { break };
+                chol.solve_in_place_par(x.rb_mut(), faer::Par::Seq);
+                for j in 0..x.ncols() {
+                    x.rb_mut().col_mut(j).iter_mut().for_each(|v| *v = -*v);
+                }
+            };
+            std::thread::scope(|scope| {
+                let lanczos = scope.spawn(|| {
+                    let modes = lowest_modes(&chol, &k_ii, &m_ii, Want::Below(lmax));
+                    solve_chunks();
+                    modes
+                });
+                solve_chunks();
+                lanczos.join().expect("Lanczos thread panicked")
+            })
+        };
         let modes = modes?;
         let phi = modes.vectors;
         let nm = phi.ncols();
@@ -150,7 +198,7 @@ impl CraigBampton {
         let x = par_mul_dense(&m_ii, psi.as_ref()); // M_ii Psi
         lap("m_psi", &mut timings);
         let mibt_psi = sparse_t_dense(&m_ib, psi.as_ref()); // M_ib^T Psi
-        let mbb = &m_bb + &mibt_psi + mibt_psi.transpose() + psi.transpose() * &x;
+        let mbb = &m_bb + &mibt_psi + mibt_psi.transpose() + sym_product(psi.as_ref(), x.as_ref());
         lap("m_bb", &mut timings);
         let mbk = sparse_t_dense(&m_ib, phi.as_ref()) + x.transpose() * &phi;
         let mphi = m_ii.mul_dense(phi.as_ref());

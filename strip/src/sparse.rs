@@ -1,10 +1,10 @@
 //! Minimal compressed-sparse-column storage with the few operations the pipeline needs, and a
 //! bridge to faer's sparse Cholesky (AMD ordering, supernodal when worthwhile).
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{MatMut, Side};
+use faer::{Conj, MatMut, Par, Side};
 
 use crate::error::{numeric, Result};
 
@@ -57,6 +57,24 @@ impl Csc {
             col_ptr.push(row_idx.len());
         }
         Csc { nrows: new_nrows, ncols: cols.len(), col_ptr, row_idx, val }
+    }
+
+    /// Copy without the stored zeros (the consistent mass shares the stiffness pattern, whose
+    /// 3x3 node blocks are dense, but couples only equal directions: two thirds are zeros).
+    pub fn without_zeros(&self) -> Csc {
+        let mut col_ptr = Vec::with_capacity(self.ncols + 1);
+        let (mut row_idx, mut val) = (Vec::new(), Vec::new());
+        col_ptr.push(0);
+        for c in 0..self.ncols {
+            for p in self.col_ptr[c]..self.col_ptr[c + 1] {
+                if self.val[p] != 0.0 {
+                    row_idx.push(self.row_idx[p]);
+                    val.push(self.val[p]);
+                }
+            }
+            col_ptr.push(row_idx.len());
+        }
+        Csc { nrows: self.nrows, ncols: self.ncols, col_ptr, row_idx, val }
     }
 
     /// y = A x
@@ -114,26 +132,40 @@ impl Csc {
 }
 
 /// Sparse Cholesky factor of a symmetric positive definite matrix (lower triangle used).
+/// Owns faer's symbolic structure and values so that solves can choose their parallelism (the
+/// many-right-hand-side solves run on the caller's own threads).
 pub struct Cholesky {
-    llt: Llt<usize, f64>,
+    symbolic: SymbolicCholesky<usize>,
+    values: Vec<f64>,
     pub n: usize,
 }
 
 impl Cholesky {
     pub fn new(a: &Csc, stage: &'static str) -> Result<Cholesky> {
-        let sym = SymbolicLlt::try_new(a.as_faer().symbolic(), Side::Lower)
+        let symbolic = factorize_symbolic_cholesky(a.as_faer().symbolic(), Side::Lower, Default::default(), Default::default())
             .map_err(|e| numeric(stage, format!("symbolic Cholesky: {e:?}")))?;
-        let llt = Llt::try_new_with_symbolic(sym, a.as_faer(), Side::Lower)
+        let mut values = vec![0.0; symbolic.len_val()];
+        let par = faer::get_global_parallelism();
+        let mut mem = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()));
+        symbolic
+            .factorize_numeric_llt(&mut values, a.as_faer(), Side::Lower, Default::default(), par, MemStack::new(&mut mem), Default::default())
             .map_err(|e| numeric(stage, format!("matrix not positive definite ({e:?})")))?;
-        Ok(Cholesky { llt, n: a.nrows })
+        Ok(Cholesky { symbolic, values, n: a.nrows })
     }
 
-    pub fn solve_in_place(&self, rhs: MatMut<'_, f64>) {
-        self.llt.solve_in_place(rhs);
+    /// Stored values of the factor (its size).
+    pub fn factor_len(&self) -> usize {
+        self.values.len()
+    }
+
+    /// Solves in place with the given parallelism for the dense kernels.
+    pub fn solve_in_place_par(&self, rhs: MatMut<'_, f64>, par: Par) {
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), par));
+        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(Conj::No, rhs, par, MemStack::new(&mut mem));
     }
 
     pub fn solve_vec(&self, rhs: &mut [f64]) {
         let n = rhs.len();
-        self.llt.solve_in_place(faer::MatMut::from_column_major_slice_mut(rhs, n, 1));
+        self.solve_in_place_par(faer::MatMut::from_column_major_slice_mut(rhs, n, 1), Par::Seq);
     }
 }

@@ -58,7 +58,7 @@ impl FullSystem {
             free_of[d] = i;
         }
         let k_ff = asm.k.submatrix(&free_of, free.len(), &free);
-        let m_ff = asm.m.submatrix(&free_of, free.len(), &free);
+        let m_ff = asm.m.submatrix(&free_of, free.len(), &free).without_zeros();
         let react: Vec<usize> = bottom_nodes.iter().map(|&n| 3 * n + 1).collect();
         let mut react_of = vec![usize::MAX; ndof];
         for (i, &d) in react.iter().enumerate() {
