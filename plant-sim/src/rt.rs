@@ -46,6 +46,24 @@ pub fn pin_thread_to_cpu(cpu: usize) -> bool {
     }
 }
 
+/// Take one CPU out of the calling thread's affinity, so the threads it spawns from now on
+/// (affinity is inherited at spawn) stay off it: a lockstep run keeps the recorder's writer off
+/// the CPU its loop and controller are pinned to. Returns false if no other CPU is left or the
+/// kernel refused. Note: [`lockstep_cpu`] counts the CPUs of the calling thread's affinity, so
+/// call it before this.
+pub fn keep_thread_off_cpu(cpu: usize) -> bool {
+    // SAFETY: cpu_set_t is plain data; sched_getaffinity fills it, CPU_* stay within it.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        let size = std::mem::size_of::<libc::cpu_set_t>();
+        if libc::sched_getaffinity(0, size, &mut set) != 0 {
+            return false;
+        }
+        libc::CPU_CLR(cpu, &mut set);
+        libc::CPU_COUNT(&set) > 0 && libc::sched_setaffinity(0, size, &set) == 0
+    }
+}
+
 /// Hold the kernel's PM QoS CPU latency request at 0 µs for the rest of the process, as cyclictest
 /// does: idle CPUs then poll instead of halting, so a wake-up (the controller's notification, the
 /// tick timer) costs a few µs instead of a vCPU exit and an inter-processor interrupt (tens of µs
