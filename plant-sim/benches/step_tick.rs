@@ -1,6 +1,6 @@
-//! Cost of one plant tick: `loop.substeps` RK4 steps of the forward dynamics, robot only and with
-//! the strip contact (default scenario), plus the once-per-tick strip record. The lockstep speed
-//! target (20x real time) leaves ~50 µs per tick for plant + controller + IPC.
+//! Cost of one plant tick: `loop.substeps` steps of the robot integrator (midpoint and RK4), robot
+//! only and with the strip contact (default scenario), plus the once-per-tick strip record. The
+//! lockstep speed target (20x real time) leaves ~50 µs per tick for plant + controller + IPC.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use plant_sim::physics::Physics;
@@ -14,6 +14,15 @@ fn step_tick(c: &mut Criterion) {
         b.iter(|| {
             let tau = p.gravity_torque();
             p.step_tick(std::hint::black_box(&tau));
+        })
+    });
+    let mut s_rk4 = s.clone();
+    s_rk4.loop_.integrator = scenario::Integrator::Rk4;
+    let mut p_rk4 = Physics::new(&s_rk4, Path::new("/nonexistent")).unwrap();
+    c.bench_function("physics.step_tick (robot only, default substeps, rk4)", |b| {
+        b.iter(|| {
+            let tau = p_rk4.gravity_torque();
+            p_rk4.step_tick(std::hint::black_box(&tau));
         })
     });
     let robot = p.robot().clone();

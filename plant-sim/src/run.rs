@@ -146,7 +146,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
                 ("contract_version".to_string(), messages::CONTRACT_VERSION.to_string()),
                 ("period_s".to_string(), l.period_s.to_string()),
                 ("substeps".to_string(), l.substeps.to_string()),
-                ("integrator".to_string(), "rk4".to_string()),
+                ("integrator".to_string(), l.integrator.name().to_string()),
             ];
             // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
             if let Some(c) = physics.contact() {

@@ -35,6 +35,29 @@ pub enum Mode {
     Lockstep,
 }
 
+/// How the plant integrates the robot over one substep (the strip is always stepped exactly).
+/// Both converge to the same tracking figures: the held contact wrench limits the coupled plant to
+/// first order in the substep, so the robot integrator's own order shows only in free motion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Integrator {
+    /// Explicit midpoint (second-order Runge–Kutta): 2 forward-dynamics calls per substep.
+    #[default]
+    Midpoint,
+    /// Classic fourth-order Runge–Kutta: 4 forward-dynamics calls per substep.
+    Rk4,
+}
+
+impl Integrator {
+    /// The name used in scenario files and recording metadata.
+    pub fn name(self) -> &'static str {
+        match self {
+            Integrator::Midpoint => "midpoint",
+            Integrator::Rk4 => "rk4",
+        }
+    }
+}
+
 impl std::str::FromStr for Mode {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
@@ -79,8 +102,10 @@ pub struct LoopConfig {
     pub lockstep_watchdog_s: f64,
     /// Run length, s (the launcher may override it). 0 = until the trajectory ends plus 0.2 s.
     pub duration_s: f64,
-    /// Plant integration substeps per tick (robot RK4 and strip ZOH steps).
+    /// Plant integration substeps per tick (robot integrator and strip ZOH steps).
     pub substeps: u32,
+    /// Robot integrator per substep: "midpoint" (default) or "rk4".
+    pub integrator: Integrator,
     /// Safe stop joint damping, N m s/rad.
     pub safe_stop_damping_nms: f64,
     /// How long the torque is blended from the held value to a new controller's value, s.
@@ -108,6 +133,7 @@ impl Default for LoopConfig {
             lockstep_watchdog_s: 2.0,
             duration_s: 0.0,
             substeps: 10,
+            integrator: Integrator::Midpoint,
             safe_stop_damping_nms: 20.0,
             takeover_blend_s: 0.05,
             spin_wait_us: 0.0,
@@ -487,6 +513,15 @@ mod tests {
         assert!(e.contains("x/bad.toml"), "{e}");
         assert!(e.contains("line 3"), "{e}");
         assert!(e.contains("budget_typo"), "{e}");
+    }
+
+    #[test]
+    fn integrator_is_named_in_the_file_and_unknown_names_are_refused() {
+        let s = Scenario::from_toml_str("[loop]\nintegrator = \"rk4\"\n", Path::new("t.toml")).unwrap();
+        assert_eq!(s.loop_.integrator, Integrator::Rk4);
+        assert_eq!(s.loop_.integrator.name(), "rk4");
+        let e = Scenario::from_toml_str("[loop]\nintegrator = \"euler\"\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("euler"), "{e}");
     }
 
     #[test]
