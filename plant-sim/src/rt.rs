@@ -64,6 +64,16 @@ pub fn keep_thread_off_cpu(cpu: usize) -> bool {
     }
 }
 
+/// Set the calling thread's nice value (Linux: per thread). Returns false if refused (lowering it
+/// below 0 needs CAP_SYS_NICE or an RLIMIT_NICE allowance).
+pub fn set_thread_nice(nice: i32) -> bool {
+    // SAFETY: plain syscalls on the calling thread.
+    unsafe {
+        let tid = libc::gettid() as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, nice) == 0
+    }
+}
+
 /// Hold the kernel's PM QoS CPU latency request at 0 µs for the rest of the process, as cyclictest
 /// does: idle CPUs then poll instead of halting, so a wake-up (the controller's notification, the
 /// tick timer) costs a few µs instead of a vCPU exit and an inter-processor interrupt (tens of µs
