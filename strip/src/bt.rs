@@ -316,8 +316,10 @@ pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) 
         tm = now;
     };
     crate::progress::stage("Gramians");
-    let mut p = weighted.gramian(false);
-    let mut q = weighted.gramian(true);
+    let (mut p, mut q) = std::thread::scope(|s| {
+        let obs = s.spawn(|| weighted.gramian(true));
+        (weighted.gramian(false), obs.join().expect("Gramian thread panicked"))
+    });
     // diagonal state scaling x_modal = S x_s with S = sqrt(diag P): the modal Gramians span many
     // decades (fast constraint modes), the scaled ones have a unit diagonal
     let sc: Vec<f64> = (0..n).map(|i| if p[(i, i)] > 0.0 { p[(i, i)].sqrt() } else { 1.0 }).collect();

@@ -3,7 +3,7 @@
 //! cut-off frequency. T_CB = [[I, 0], [Psi, Phi]] (5.19); K_CB = diag(K_bb^S, Omega^2),
 //! M_CB = T^T M T (5.16)-(5.17).
 
-use faer::reborrow::ReborrowMut;
+use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::Mat;
 
 use crate::eig::{lowest_modes, Want};
@@ -43,24 +43,6 @@ fn sym(a: &mut Mat<f64>) {
             a[(j, i)] = v;
         }
     }
-}
-
-/// A X with the columns of X split over two threads (the sparse product is memory-bound and
-/// single-threaded in faer).
-fn par_mul_dense(a: &Csc, x: faer::MatRef<'_, f64>) -> Mat<f64> {
-    let k = x.ncols();
-    if k < 64 {
-        return a.mul_dense(x);
-    }
-    let h = k / 2;
-    let (l, r) = std::thread::scope(|s| {
-        let right = s.spawn(|| a.mul_dense(x.subcols(h, k - h)));
-        (a.mul_dense(x.subcols(0, h)), right.join().expect("product thread panicked"))
-    });
-    let mut y = Mat::<f64>::zeros(a.nrows, k);
-    y.as_mut().subcols_mut(0, h).copy_from(&l);
-    y.as_mut().subcols_mut(h, k - h).copy_from(&r);
-    y
 }
 
 /// A^T B for a symmetric result (A^T B = B^T A, e.g. Psi^T (M Psi)): only the lower half is
@@ -155,20 +137,25 @@ impl CraigBampton {
         let chol = Cholesky::new(&k_ii, "Craig-Bampton K_ii factorisation")?;
         lap("factorisation", &mut timings);
         crate::progress::stage("constraint modes and fixed-interface modes");
-        // Both only read the factor: the single-vector Lanczos run (sequential, memory-bound) on
-        // one thread, the many-right-hand-side solve for Psi in column chunks shared by both
-        // threads (the Lanczos thread joins in when its eigenpairs have converged).
+        // Both only read the factor: the block Lanczos run (sequential steps) on one thread, the
+        // many-right-hand-side solve for Psi in column chunks shared by both threads (the Lanczos
+        // thread joins in when its eigenpairs have converged). Each chunk's M_ii Psi is formed
+        // while the chunk is fresh in cache.
         let lmax = (2.0 * std::f64::consts::PI * p.cb_cutoff_hz).powi(2);
         let mut psi = k_ib.to_dense();
+        let mut x = Mat::<f64>::zeros(ni, nb); // M_ii Psi
         let modes = {
-            let chunks = std::sync::Mutex::new(column_chunks(psi.as_mut(), PSI_CHUNK));
+            let work: Vec<_> =
+                column_chunks(psi.as_mut(), PSI_CHUNK).into_iter().zip(column_chunks(x.as_mut(), PSI_CHUNK)).collect();
+            let work = std::sync::Mutex::new(work);
             let solve_chunks = || loop {
-                let next = chunks.lock().expect("chunk queue poisoned").pop();
-                let Some(mut x) = next else { break };
-                chol.solve_in_place_par(x.rb_mut(), faer::Par::Seq);
-                for j in 0..x.ncols() {
-                    x.rb_mut().col_mut(j).iter_mut().for_each(|v| *v = -*v);
+                let next = work.lock().expect("chunk queue poisoned").pop();
+                let Some((mut psi_c, x_c)) = next else { break };
+                chol.solve_sparse_rhs_in_place(psi_c.rb_mut());
+                for j in 0..psi_c.ncols() {
+                    psi_c.rb_mut().col_mut(j).iter_mut().for_each(|v| *v = -*v);
                 }
+                m_ii.mul_dense_to(psi_c.rb(), x_c);
             };
             std::thread::scope(|scope| {
                 let lanczos = scope.spawn(|| {
@@ -195,8 +182,6 @@ impl CraigBampton {
         let kkk = phi.transpose() * &kphi;
         k.as_mut().submatrix_mut(nb, nb, nm, nm).copy_from(&kkk);
         lap("k_reduced", &mut timings);
-        let x = par_mul_dense(&m_ii, psi.as_ref()); // M_ii Psi
-        lap("m_psi", &mut timings);
         let mibt_psi = sparse_t_dense(&m_ib, psi.as_ref()); // M_ib^T Psi
         let mbb = &m_bb + &mibt_psi + mibt_psi.transpose() + sym_product(psi.as_ref(), x.as_ref());
         lap("m_bb", &mut timings);

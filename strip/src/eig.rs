@@ -38,28 +38,64 @@ const TOL_COUNT: f64 = 1e-6;
 const BLOCK: usize = 8;
 
 /// M-orthonormalises the columns of `w` in place (Cholesky QR, twice), returning M w and the
-/// factor R with w_in = w_out R (p x p, upper triangular).
+/// factor R with w_in = w_out R (p x p, upper triangular). One sparse product: M w is carried
+/// through the same small right-hand transformations as w.
 fn m_orthonormalise(w: &mut Mat<f64>, m: &Csc) -> Result<(Mat<f64>, Mat<f64>)> {
     let p = w.ncols();
     let mut r_total = Mat::<f64>::identity(p, p);
     let mut mw = m.mul_dense(w.as_ref());
     for _ in 0..2 {
-        let g = w.transpose() * &mw;
+        let g = mul_seq(w.transpose(), mw.as_ref());
         let g = Mat::from_fn(p, p, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
         let llt = g
             .llt(Side::Lower)
             .map_err(|_| numeric("lanczos", "Krylov block lost rank (invariant subspace reached before convergence)"))?;
         let l = llt.L();
-        // w <- w L^-T, i.e. solve X L^T = w, transposed: L X^T = w^T
-        let mut wt = w.transpose().to_owned();
-        l.solve_lower_triangular_in_place(wt.as_mut());
-        *w = wt.transpose().to_owned();
-        let mut mwt = mw.transpose().to_owned();
-        l.solve_lower_triangular_in_place(mwt.as_mut());
-        mw = mwt.transpose().to_owned();
+        let mut l_inv_t = Mat::<f64>::identity(p, p); // L^-T = (L^-1 I)^T
+        l.solve_lower_triangular_in_place(l_inv_t.as_mut());
+        let l_inv_t = l_inv_t.transpose().to_owned();
+        *w = mul_seq(w.as_ref(), l_inv_t.as_ref());
+        mw = mul_seq(mw.as_ref(), l_inv_t.as_ref());
         r_total = l.transpose() * &r_total;
     }
     Ok((mw, r_total))
+}
+
+/// A B on the calling thread (the Lanczos run shares the machine with the constraint-mode solves).
+fn mul_seq(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
+    let mut c = Mat::<f64>::zeros(a.nrows(), b.ncols());
+    faer::linalg::matmul::matmul(c.as_mut(), faer::Accum::Replace, a, b, 1.0, Par::Seq);
+    c
+}
+
+/// W -= A B on the calling thread.
+fn sub_mul_seq(w: &mut Mat<f64>, a: MatRef<'_, f64>, b: MatRef<'_, f64>) {
+    faer::linalg::matmul::matmul(w.as_mut(), faer::Accum::Add, a, b, -1.0, Par::Seq);
+}
+
+/// Column storage that grows by doubling (Krylov basis and its M image).
+struct Basis {
+    cols: Mat<f64>,
+    len: usize,
+}
+
+impl Basis {
+    fn new(n: usize, cap: usize) -> Basis {
+        Basis { cols: Mat::zeros(n, cap), len: 0 }
+    }
+    fn view(&self) -> MatRef<'_, f64> {
+        self.cols.as_ref().subcols(0, self.len)
+    }
+    fn push(&mut self, block: MatRef<'_, f64>) {
+        let (n, p) = (self.cols.nrows(), block.ncols());
+        if self.len + p > self.cols.ncols() {
+            let mut bigger = Mat::<f64>::zeros(n, (2 * self.cols.ncols()).max(self.len + p));
+            bigger.as_mut().subcols_mut(0, self.len).copy_from(self.view());
+            self.cols = bigger;
+        }
+        self.cols.as_mut().subcols_mut(self.len, p).copy_from(block);
+        self.len += p;
+    }
 }
 
 /// Deterministic pseudo-random start block.
@@ -92,30 +128,26 @@ pub fn lowest_modes_block(k_fact: &Cholesky, m: &Csc, want: Want, p: usize) -> R
         Want::Count(c) => p * (c + 60),
         Want::Below(_) => 4000,
     });
-    // M-orthonormal Krylov blocks Q_j, their M Q_j, and the projection T = Q^T M K^-1 M Q
-    let mut q: Vec<Mat<f64>> = Vec::new();
-    let mut mq: Vec<Mat<f64>> = Vec::new();
-    let mut t_blocks: Vec<Vec<Mat<f64>>> = Vec::new(); // t_blocks[j][i] = T_ij, i <= j
+    // M-orthonormal Krylov basis Q (blocks of p), M Q, and the projection T = Q^T M K^-1 M Q
+    let cap = (16 * p).min(max_vecs.max(p));
+    let (mut q, mut mq) = (Basis::new(n, cap), Basis::new(n, cap));
+    let mut t_cols: Vec<Mat<f64>> = Vec::new(); // block column j of T, rows 0..(j + 1) p
     let mut w = start_block(n, p);
     let (mw, _) = m_orthonormalise(&mut w, m)?;
-    q.push(w);
-    mq.push(mw);
+    q.push(w.as_ref());
+    mq.push(mw.as_ref());
     loop {
-        let j = q.len() - 1;
-        let mut w = mq[j].clone();
+        let j = q.len / p - 1;
+        let mut w = mq.view().subcols(j * p, p).to_owned();
         k_fact.solve_in_place_par(w.as_mut(), Par::Seq);
-        // classical block Gram-Schmidt against every block: the first-pass coefficients are the
+        // classical Gram-Schmidt against the whole basis: the first-pass coefficients are the
         // entries of T; a second pass removes the rounding left by the first
-        let coef: Vec<Mat<f64>> = mq.iter().map(|mqi| mqi.transpose() * &w).collect();
-        for (qi, c) in q.iter().zip(&coef) {
-            w -= qi * c;
-        }
-        for (qi, mqi) in q.iter().zip(&mq) {
-            let c = mqi.transpose() * &w;
-            w -= qi * &c;
-        }
-        t_blocks.push(coef);
-        let k = q.len() * p;
+        let coef = mul_seq(mq.view().transpose(), w.as_ref());
+        sub_mul_seq(&mut w, q.view(), coef.as_ref());
+        let c2 = mul_seq(mq.view().transpose(), w.as_ref());
+        sub_mul_seq(&mut w, q.view(), c2.as_ref());
+        t_cols.push(coef);
+        let k = q.len;
         let exhausted = k + p > max_vecs;
         let (mw, b) = match m_orthonormalise(&mut w, m) {
             Ok(x) => x,
@@ -123,14 +155,13 @@ pub fn lowest_modes_block(k_fact: &Cholesky, m: &Csc, want: Want, p: usize) -> R
             Err(_) => (Mat::zeros(n, p), Mat::zeros(p, p)),
         };
         // Ritz pairs of the projection, residual ||B s_last|| for Ritz vector Q s
-        // T_ab (block row a, block column b) = t_blocks[b][a] for a <= b, symmetric
+        // T_ab (block row a, block column b) = t_cols[b] rows of block a, for a <= b; symmetric
         let t = Mat::from_fn(k, k, |r, c| {
-            let (a, b, x, y) = (r / p, c / p, r % p, c % p);
-            let (a, b, x, y) = if a <= b { (a, b, x, y) } else { (b, a, y, x) };
-            if a == b {
-                0.5 * (t_blocks[b][a][(x, y)] + t_blocks[b][a][(y, x)])
+            let (r, c) = if r / p <= c / p { (r, c) } else { (c, r) };
+            if r / p == c / p {
+                0.5 * (t_cols[c / p][(r, c % p)] + t_cols[r / p][(c, r % p)])
             } else {
-                t_blocks[b][a][(x, y)]
+                t_cols[c / p][(r, c % p)]
             }
         });
         let evd = t.self_adjoint_eigen(Side::Lower).map_err(|e| numeric("lanczos", format!("{e:?}")))?;
@@ -162,14 +193,10 @@ pub fn lowest_modes_block(k_fact: &Cholesky, m: &Csc, want: Want, p: usize) -> R
             }
             let lambda: Vec<f64> = take.iter().map(|&x| 1.0 / s[x]).collect();
             let sel = Mat::from_fn(k, take.len(), |r, c| u[(r, take[c])]);
-            let mut vectors = Mat::<f64>::zeros(n, take.len());
-            for (bi, qi) in q.iter().enumerate() {
-                let rows: MatRef<'_, f64> = sel.as_ref().subrows(bi * p, p);
-                vectors += qi * rows;
-            }
+            let vectors = mul_seq(q.view(), sel.as_ref());
             return Ok(Modes { lambda, vectors });
         }
-        q.push(w);
-        mq.push(mw);
+        q.push(w.as_ref());
+        mq.push(mw.as_ref());
     }
 }

@@ -119,35 +119,43 @@ impl StripModel {
         let cb = CraigBampton::build(&sys, p)?;
         tm.lap("craig_bampton");
         let cb_sub = cb.timings.clone();
-        crate::progress::stage("CB modal form");
-        let cb_modal = cb_modal_system(&cb, p)?;
-        tm.lap("cb_modal");
-        // weight the two output groups alike for balancing: equal DC-gain Frobenius norms
-        let n_top = sys.top_nodes.len();
-        let (mut nt, mut nbm) = (0.0, 0.0);
-        {
-            let g0 = cb_modal.dc_gain();
-            for i in 0..g0.nrows() {
-                let s: f64 = g0.row(i).iter().map(|v| v * v).sum();
-                if i < n_top {
-                    nt += s;
-                } else {
-                    nbm += s;
+        // the bulge statics need only the CB factor: solved beside the modal form and the
+        // balanced truncation (its own wall time is recorded)
+        let (cb_modal, red, (bulge_top_uy_m, bulge_bottom_reaction_n, bulge_s)) = std::thread::scope(|s| -> Result<_> {
+            let bulge = s.spawn(|| {
+                let t = Instant::now();
+                let q_r: Vec<f64> = sys.bottom_nodes.iter().map(|&n| p.bulge_height_m(sys.mesh.coords[n][2])).collect();
+                let q_f = cb.static_prescribed(&q_r, sys.n_free());
+                let top: Vec<f64> = sys.top_y_free.iter().map(|&f| q_f[f]).collect();
+                let mut bottom = vec![0.0; sys.bottom_nodes.len()];
+                sys.reactions(&q_f, Some(&q_r), &mut bottom);
+                (top, bottom, t.elapsed().as_secs_f64())
+            });
+            crate::progress::stage("CB modal form");
+            let cb_modal = cb_modal_system(&cb, p)?;
+            tm.lap("cb_modal");
+            // weight the two output groups alike for balancing: equal DC-gain Frobenius norms
+            let n_top = sys.top_nodes.len();
+            let (mut nt, mut nbm) = (0.0, 0.0);
+            {
+                let g0 = cb_modal.dc_gain();
+                for i in 0..g0.nrows() {
+                    let s: f64 = g0.row(i).iter().map(|v| v * v).sum();
+                    if i < n_top {
+                        nt += s;
+                    } else {
+                        nbm += s;
+                    }
                 }
             }
-        }
-        let w_bottom = if nbm > 0.0 { (nt / nbm).sqrt() } else { 1.0 };
-        let out_weight: Vec<f64> =
-            (0..cb_modal.h.nrows()).map(|i| if i < n_top { 1.0 } else { w_bottom }).collect();
-        let red = balanced_matched_dc(&cb_modal, p.order, &out_weight)?;
-        tm.lap("balanced_truncation");
-        crate::progress::stage("bulge statics");
-        let q_r: Vec<f64> = sys.bottom_nodes.iter().map(|&n| p.bulge_height_m(sys.mesh.coords[n][2])).collect();
-        let q_f = cb.static_prescribed(&q_r, sys.n_free());
-        let bulge_top_uy_m: Vec<f64> = sys.top_y_free.iter().map(|&f| q_f[f]).collect();
-        let mut bulge_bottom_reaction_n = vec![0.0; sys.bottom_nodes.len()];
-        sys.reactions(&q_f, Some(&q_r), &mut bulge_bottom_reaction_n);
-        tm.lap("bulge");
+            let w_bottom = if nbm > 0.0 { (nt / nbm).sqrt() } else { 1.0 };
+            let out_weight: Vec<f64> =
+                (0..cb_modal.h.nrows()).map(|i| if i < n_top { 1.0 } else { w_bottom }).collect();
+            let red = balanced_matched_dc(&cb_modal, p.order, &out_weight)?;
+            tm.lap("balanced_truncation");
+            Ok((cb_modal, red, bulge.join().expect("bulge thread panicked")))
+        })?;
+        tm.out.push(("bulge".to_string(), bulge_s));
         crate::progress::stage("modal form of the reduced model");
         let modal = modal_form(&red.a, &red.b, &red.c)?;
         tm.lap("reduced_modal_form");

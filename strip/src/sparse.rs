@@ -2,8 +2,11 @@
 //! bridge to faer's sparse Cholesky (AMD ordering, supernodal when worthwhile).
 
 use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
+use faer::reborrow::Reborrow;
+use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
+use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::reborrow::ReborrowMut;
 use faer::{Conj, MatMut, Par, Side};
 
 use crate::error::{numeric, Result};
@@ -94,15 +97,46 @@ impl Csc {
     /// Y = A X for a dense X (ncols x k), returned as nrows x k.
     pub fn mul_dense(&self, x: faer::MatRef<'_, f64>) -> faer::Mat<f64> {
         let mut y = faer::Mat::<f64>::zeros(self.nrows, x.ncols());
-        faer::sparse::linalg::matmul::sparse_dense_matmul(
-            y.as_mut(),
-            faer::Accum::Replace,
-            self.as_faer(),
-            x,
-            1.0,
-            faer::get_global_parallelism(),
-        );
+        self.mul_dense_to(x, y.as_mut());
         y
+    }
+
+    /// Y = A X into `y` (overwritten). Panels of `PANEL` columns of X and Y are packed row-major,
+    /// so each stored entry of A does one contiguous multiply-add over the panel instead of
+    /// `PANEL` strided ones (single-threaded; callers split columns over threads).
+    pub fn mul_dense_to(&self, x: faer::MatRef<'_, f64>, mut y: faer::MatMut<'_, f64>) {
+        const PANEL: usize = 8;
+        assert!(x.nrows() == self.ncols && y.nrows() == self.nrows && y.ncols() == x.ncols(), "shape mismatch");
+        let k = x.ncols();
+        let mut xb = vec![0.0; self.ncols * PANEL];
+        let mut yb = vec![0.0; self.nrows * PANEL];
+        for c0 in (0..k).step_by(PANEL) {
+            let w = PANEL.min(k - c0);
+            if w < PANEL {
+                xb.fill(0.0);
+            }
+            for j in 0..w {
+                for (i, v) in x.col(c0 + j).iter().enumerate() {
+                    xb[i * PANEL + j] = *v;
+                }
+            }
+            yb.fill(0.0);
+            for c in 0..self.ncols {
+                let xc: [f64; PANEL] = xb[c * PANEL..(c + 1) * PANEL].try_into().expect("panel width");
+                let (s, e) = (self.col_ptr[c], self.col_ptr[c + 1]);
+                for (&r, &v) in self.row_idx[s..e].iter().zip(&self.val[s..e]) {
+                    let yr = &mut yb[r * PANEL..(r + 1) * PANEL];
+                    for j in 0..PANEL {
+                        yr[j] += v * xc[j];
+                    }
+                }
+            }
+            for j in 0..w {
+                for (i, v) in y.rb_mut().col_mut(c0 + j).iter_mut().enumerate() {
+                    *v = yb[i * PANEL + j];
+                }
+            }
+        }
     }
 
     /// Y = A^T X for a dense X (nrows x k), returned as ncols x k.
@@ -162,6 +196,76 @@ impl Cholesky {
     pub fn solve_in_place_par(&self, rhs: MatMut<'_, f64>, par: Par) {
         let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), par));
         LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(Conj::No, rhs, par, MemStack::new(&mut mem));
+    }
+
+    /// Solves in place on the calling thread for right-hand sides with few nonzero rows (the
+    /// constraint-mode loads K_ib): the forward substitution skips every supernode that no
+    /// nonzero can reach (in the elimination tree), which is more than half of them for a chunk
+    /// of neighbouring top nodes. Skipped supernodes would only add exact zeros, so the result
+    /// equals the dense solve's.
+    pub fn solve_sparse_rhs_in_place(&self, rhs: MatMut<'_, f64>) {
+        let (SymbolicCholeskyRaw::Supernodal(sn), Some(perm)) = (self.symbolic.raw(), self.symbolic.perm()) else {
+            return self.solve_in_place_par(rhs, Par::Seq);
+        };
+        let (fwd, inv) = perm.arrays();
+        let (n, k) = (self.n, rhs.ncols());
+        let mut rhs = rhs;
+        let mut x = faer::Mat::<f64>::zeros(n, k);
+        for j in 0..k {
+            for i in 0..n {
+                x[(i, j)] = rhs[(fwd[i], j)];
+            }
+        }
+        let l = SupernodalLltRef::new(sn, &self.values);
+        let ns = sn.n_supernodes();
+        let mut row_sn = vec![0usize; n];
+        for s in 0..ns {
+            let sup = l.supernode(s);
+            let size = sup.val().ncols();
+            row_sn[sup.start()..sup.start() + size].iter_mut().for_each(|v| *v = s);
+        }
+        let mut reached = vec![false; ns];
+        for i in 0..n {
+            if (0..k).any(|j| x[(i, j)] != 0.0) {
+                reached[row_sn[i]] = true;
+            }
+        }
+        for s in 0..ns {
+            if !reached[s] {
+                continue;
+            }
+            let sup = l.supernode(s);
+            let (ls, pattern) = (sup.val(), sup.pattern());
+            let size = ls.ncols();
+            let (ls_top, ls_bot) = ls.split_at_row(size);
+            let mut x_top = x.as_mut().subrows_mut(sup.start(), size);
+            faer::linalg::triangular_solve::solve_lower_triangular_in_place(ls_top, x_top.rb_mut(), Par::Seq);
+            let mut tmp = faer::Mat::<f64>::zeros(pattern.len(), k);
+            faer::linalg::matmul::matmul(tmp.as_mut(), faer::Accum::Replace, ls_bot, x_top.rb(), 1.0, Par::Seq);
+            for j in 0..k {
+                for (idx, &i) in pattern.iter().enumerate() {
+                    x[(i, j)] -= tmp[(idx, j)];
+                }
+            }
+            for &i in pattern {
+                reached[row_sn[i]] = true;
+            }
+        }
+        for s in (0..ns).rev() {
+            let sup = l.supernode(s);
+            let (ls, pattern) = (sup.val(), sup.pattern());
+            let size = ls.ncols();
+            let (ls_top, ls_bot) = ls.split_at_row(size);
+            let tmp = faer::Mat::<f64>::from_fn(pattern.len(), k, |idx, j| x[(pattern[idx], j)]);
+            let mut x_top = x.as_mut().subrows_mut(sup.start(), size);
+            faer::linalg::matmul::matmul(x_top.rb_mut(), faer::Accum::Add, ls_bot.transpose(), tmp.as_ref(), -1.0, Par::Seq);
+            faer::linalg::triangular_solve::solve_upper_triangular_in_place(ls_top.transpose(), x_top.rb_mut(), Par::Seq);
+        }
+        for j in 0..k {
+            for i in 0..n {
+                rhs[(i, j)] = x[(inv[i], j)];
+            }
+        }
     }
 
     pub fn solve_vec(&self, rhs: &mut [f64]) {
