@@ -48,10 +48,10 @@ fn sym(a: &mut Mat<f64>) {
 /// A^T B for a symmetric result (A^T B = B^T A, e.g. Psi^T (M Psi)): only the lower half is
 /// multiplied, then mirrored.
 fn sym_product(a: faer::MatRef<'_, f64>, b: faer::MatRef<'_, f64>) -> Mat<f64> {
+    let par = faer::get_global_parallelism();
     use faer::linalg::matmul::triangular::{matmul, BlockStructure as Bs};
     let n = a.ncols();
     let mut c = Mat::<f64>::zeros(n, n);
-    let par = faer::get_global_parallelism();
     matmul(c.as_mut(), Bs::TriangularLower, faer::Accum::Replace, a.transpose(), Bs::Rectangular, b, Bs::Rectangular, 1.0, par);
     for j in 0..n {
         for i in 0..j {
@@ -61,11 +61,12 @@ fn sym_product(a: faer::MatRef<'_, f64>, b: faer::MatRef<'_, f64>) -> Mat<f64> {
     c
 }
 
-/// Columns per chunk of the constraint-mode solve (a chunk's right-hand sides and the solver's
-/// workspace stay cache-friendly; measured faster per column than one 533-column block).
+/// Columns per chunk of the constraint-mode solve: neighbouring top nodes, so the forward
+/// substitution reaches few supernodes, and the chunk stays cache-friendly (measured faster per
+/// column than one 533-column block or chunks of 32 or 128).
 const PSI_CHUNK: usize = 64;
 
-/// Splits `x` into column chunks of at most `width` (last chunk first out of `pop`).
+/// Splits `x` into consecutive column chunks of at most `width`.
 fn column_chunks(x: faer::MatMut<'_, f64>, width: usize) -> Vec<faer::MatMut<'_, f64>> {
     let mut out = Vec::new();
     let mut rest = x;
@@ -75,12 +76,13 @@ fn column_chunks(x: faer::MatMut<'_, f64>, width: usize) -> Vec<faer::MatMut<'_,
         rest = tail;
     }
     out.push(rest);
-    out.reverse();
     out
 }
 
+/// A^T X through the transposed storage and the packed panel product (the boundary blocks have
+/// few entries per column; faer's transposed product is slower here).
 fn sparse_t_dense(a: &Csc, x: faer::MatRef<'_, f64>) -> Mat<f64> {
-    a.mul_t_dense(x)
+    transpose(a).mul_dense(x)
 }
 
 impl CraigBampton {
@@ -155,7 +157,7 @@ impl CraigBampton {
                 for j in 0..psi_c.ncols() {
                     psi_c.rb_mut().col_mut(j).iter_mut().for_each(|v| *v = -*v);
                 }
-                m_ii.mul_dense_to(psi_c.rb(), x_c);
+                m_ii.sym_mul_dense_to(psi_c.rb(), x_c);
             };
             std::thread::scope(|scope| {
                 let lanczos = scope.spawn(|| {
@@ -172,19 +174,22 @@ impl CraigBampton {
         let nm = phi.ncols();
         lap("constraint_and_fixed_interface_modes", &mut timings);
         crate::progress::stage("Craig-Bampton matrices");
+        let kbs = &k_bb + sparse_t_dense(&k_ib, psi.as_ref()); // K_bb^S (5.17)
+        let mibt_psi = sparse_t_dense(&m_ib, psi.as_ref()); // M_ib^T Psi
+        let mbb = &m_bb + &mibt_psi + mibt_psi.transpose() + sym_product(psi.as_ref(), x.as_ref());
+        let nr = sys.k_rf.nrows;
+        let rmap: Vec<usize> = (0..nr).collect();
+        let k_ri = sys.k_rf.submatrix(&rmap, nr, &interior);
+        let kri_psi = k_ri.mul_dense(psi.as_ref());
+        lap("psi_products", &mut timings);
 
         let n = nb + nm;
         let mut k = Mat::<f64>::zeros(n, n);
-        let kbs = &k_bb + sparse_t_dense(&k_ib, psi.as_ref());
         k.as_mut().submatrix_mut(0, 0, nb, nb).copy_from(&kbs);
         // Galerkin projection of K_ii on the Ritz vectors (diagonal up to their accuracy)
         let kphi = k_ii.mul_dense(phi.as_ref());
         let kkk = phi.transpose() * &kphi;
         k.as_mut().submatrix_mut(nb, nb, nm, nm).copy_from(&kkk);
-        lap("k_reduced", &mut timings);
-        let mibt_psi = sparse_t_dense(&m_ib, psi.as_ref()); // M_ib^T Psi
-        let mbb = &m_bb + &mibt_psi + mibt_psi.transpose() + sym_product(psi.as_ref(), x.as_ref());
-        lap("m_bb", &mut timings);
         let mbk = sparse_t_dense(&m_ib, phi.as_ref()) + x.transpose() * &phi;
         let mphi = m_ii.mul_dense(phi.as_ref());
         let mkk = phi.transpose() * &mphi;
@@ -198,21 +203,15 @@ impl CraigBampton {
 
         lap("reduced_matrices", &mut timings);
         // reactions: K_rf T = [K_rb + K_ri Psi, K_ri Phi]
-        let nr = sys.k_rf.nrows;
-        let mut rmap = vec![usize::MAX; nr];
-        (0..nr).for_each(|i| rmap[i] = i);
-        // transpose trick: K_rf^T blocks are (free x reaction); use the symmetric full K instead
         let k_rb = sys.k_rf.submatrix(&rmap, nr, &boundary).to_dense();
-        let k_ri = sys.k_rf.submatrix(&rmap, nr, &interior);
         let mut c_react = Mat::<f64>::zeros(nr, n);
-        let kri_psi = k_ri.mul_dense(psi.as_ref());
         c_react.as_mut().submatrix_mut(0, 0, nr, nb).copy_from(&(&k_rb + &kri_psi));
         c_react.as_mut().submatrix_mut(0, nb, nr, nm).copy_from(&k_ri.mul_dense(phi.as_ref()));
 
         // prescribed bottom motion couplings (free rows x reaction cols) for the bulge
         let k_fr = transpose(&sys.k_rf);
-        let k_ic = k_fr.submatrix(&imap, ni, &(0..nr).collect::<Vec<_>>());
-        let k_bc = k_fr.submatrix(&bmap, nb, &(0..nr).collect::<Vec<_>>());
+        let k_ic = k_fr.submatrix(&imap, ni, &rmap);
+        let k_bc = k_fr.submatrix(&bmap, nb, &rmap);
 
         lap("reaction_map", &mut timings);
         Ok(CraigBampton {

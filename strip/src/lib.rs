@@ -26,4 +26,4 @@ pub use params::{CbBoundary, StripParams, Substrate};
 pub use stepper::StripStepper;
 
 /// Bumped whenever a code change alters built models; part of the cache key.
-pub const CODE_VERSION: &str = "strip-2";
+pub const CODE_VERSION: &str = "strip-3";
