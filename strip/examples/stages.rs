@@ -1,4 +1,5 @@
-//! Repeated per-stage timings (min over runs) of one cold build: `stages [element_mm] [runs]`.
+//! Per-stage wall times of repeated cold builds (min and median over runs of `info.timings_s`):
+//! `cargo run --release -p strip --example stages -- [element_mm] [runs]`.
 use std::collections::BTreeMap;
 use strip::{StripModel, StripParams};
 

@@ -2,9 +2,10 @@
 //! block shift-invert Lanczos (shift 0, operator K^-1 M, self-adjoint in the M inner product)
 //! with full re-orthogonalisation. K must be positive definite (held structure).
 //!
-//! A block of right-hand sides per solve: the sparse triangular solves are memory-bound, and a
-//! block of p columns costs little more than one column (one pass over the factor), so the
-//! Krylov space grows p vectors per pass over the factor.
+//! A block of right-hand sides per solve: the sparse triangular solves are memory-bound, a block
+//! of 8 columns costs about two single-column solves (one pass over the factor), and the Krylov
+//! space grows 8 vectors per pass. Convergence is judged on the Ritz pairs of the projection
+//! T = Q^T M K^-1 M Q with the residual norm ||B s_last|| of the block recurrence.
 
 use faer::{Mat, MatRef, Par, Side};
 
