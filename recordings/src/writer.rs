@@ -139,7 +139,33 @@ pub struct Recorder {
     path: PathBuf,
 }
 
-type McapFile = mcap::Writer<BufWriter<File>>;
+type McapFile = mcap::Writer<BufWriter<SlicedFile>>;
+
+/// Largest single `write(2)` of a recording, bytes.
+const WRITE_SLICE_BYTES: usize = 16 * 1024;
+
+/// The recording's file, written at most [`WRITE_SLICE_BYTES`] per system call. A kernel built
+/// without preemption (`PREEMPT_NONE`, common on cloud VMs) runs a syscall to its end before a
+/// woken SCHED_FIFO thread on that CPU gets it: one chunk of a few hundred kB copied into the
+/// page cache in one `write` held the controller off its CPU for long enough to miss ticks. Each
+/// return to user space between slices lets a waiting real-time thread in.
+struct SlicedFile(File);
+
+impl std::io::Write for SlicedFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.write(&buf[..buf.len().min(WRITE_SLICE_BYTES)])
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.0.flush()
+    }
+}
+
+impl std::io::Seek for SlicedFile {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.0.seek(pos)
+    }
+}
 
 impl Recorder {
     /// Creates the file, writes header, schemas, channels and metadata, and spawns the writer.
@@ -175,7 +201,7 @@ impl Recorder {
             .chunk_size(None)
             .disable_seeking(true)
             .library(format!("rig-recordings {}", env!("CARGO_PKG_VERSION")))
-            .create(BufWriter::with_capacity(1 << 16, file))
+            .create(BufWriter::with_capacity(WRITE_SLICE_BYTES, SlicedFile(file)))
             .map_err(mcap_err)?;
         let mut channel_ids = [0u16; CHANNELS.len()];
         for (id, ch) in channel_ids.iter_mut().zip(CHANNELS.iter()) {
