@@ -360,12 +360,13 @@ impl ControllerPorts {
         newest(&self.wrench_sub)
     }
 
-    /// Publish the torque of one tick (and optional diagnostics), then wake the plant.
+    /// Publish the diagnostics (optional) and the torque of one tick, then wake the plant.
+    /// Diagnostics go first: a plant that polls sees the torque only once its diagnostics are there.
     pub fn publish(&self, torque: &JointTorque, diag: Option<&ControllerDiagnostics>) -> Result<(), PortError> {
-        self.torque_pub.send_copy(*torque).map_err(|e| err(&self.rig, "send joint torque", e))?;
         if let Some(d) = diag {
             self.diag_pub.send_copy(*d).map_err(|e| err(&self.rig, "send diagnostics", e))?;
         }
+        self.torque_pub.send_copy(*torque).map_err(|e| err(&self.rig, "send joint torque", e))?;
         self.torque_ready.notify().map_err(|e| err(&self.rig, "notify torque_ready", e))?;
         Ok(())
     }
