@@ -136,8 +136,8 @@ impl Default for LoopConfig {
             integrator: Integrator::Midpoint,
             safe_stop_damping_nms: 20.0,
             takeover_blend_s: 0.05,
-            spin_wait_us: 0.0,
-            controller_spin_us: 0.0,
+            spin_wait_us: 100.0,
+            controller_spin_us: 100.0,
             idle_poll: true,
         }
     }
