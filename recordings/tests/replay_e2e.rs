@@ -101,6 +101,20 @@ fn record_lockstep(plant: &Path, controller: &Path, name: &str, seconds: f64) ->
     out
 }
 
+/// Replay `file` into `controller` in lockstep (the recording's own scenario and a fresh rig).
+fn lockstep_replay(file: &Path, controller: PathBuf, json: Option<PathBuf>) -> ReplayArgs {
+    ReplayArgs {
+        file: file.to_path_buf(),
+        speed: None,
+        controller: Some(controller),
+        scenario: None,
+        rig: None,
+        watchdog: 2.0,
+        json,
+        allow_truncated: false,
+    }
+}
+
 #[test]
 fn replay_into_the_same_controller_reproduces_its_torques_and_a_changed_one_shows_its_change() {
     let Some((plant, hold)) = binaries() else { return };
@@ -120,16 +134,7 @@ fn replay_into_the_same_controller_reproduces_its_torques_and_a_changed_one_show
         Err(e) => println!("SKIP (python part): no python3: {e}"),
     }
 
-    let args = |controller: PathBuf| ReplayArgs {
-        file: file.clone(),
-        speed: None,
-        controller: Some(controller),
-        scenario: None,
-        rig: None,
-        watchdog: 2.0,
-        json: None,
-        allow_truncated: false,
-    };
+    let args = |controller: PathBuf| lockstep_replay(&file, controller, None);
     let same = recordings::replay::run(&args(hold.clone())).unwrap();
     assert!(same.lockstep);
     let c = same.comparison.expect("the controller answered");
@@ -189,17 +194,7 @@ fn replay_into_the_force_controller_reproduces_its_torques() {
     let file = record_lockstep(&plant, &controller, "force.mcap", 1.5);
     let rec = Recording::open_complete(&file).unwrap();
     rec.check_continuity().unwrap();
-    let out = recordings::replay::run(&ReplayArgs {
-        file: file.clone(),
-        speed: None,
-        controller: Some(controller),
-        scenario: None,
-        rig: None,
-        watchdog: 2.0,
-        json: Some(tmp("force-replay.json")),
-        allow_truncated: false,
-    })
-    .unwrap();
+    let out = recordings::replay::run(&lockstep_replay(&file, controller, Some(tmp("force-replay.json")))).unwrap();
     let c = out.comparison.unwrap();
     assert_eq!(c.ticks_compared + c.ticks_blending + c.ticks_held + c.ticks_unanswered, rec.joint_state.len());
     assert!(c.ticks_compared >= 1000 && c.identical, "{c:?}");
