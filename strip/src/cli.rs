@@ -99,6 +99,28 @@ pub enum Command {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Bond check on the full FE model in statics: the centre-line peak pressure of a roll for
+    /// the strip bonded everywhere (the plant's model) and for the laying process (glued behind
+    /// the wheel, resting without friction ahead), and the force the bonded strip needs.
+    Bond {
+        #[command(flatten)]
+        model: ModelArgs,
+        /// Wheel force (N, pressing magnitude).
+        #[arg(long, default_value_t = 10.0)]
+        force_n: f64,
+        /// Wheel travel (mm): from, to, and the sampling step.
+        #[arg(long, default_value_t = 2.0)]
+        from_mm: f64,
+        #[arg(long, default_value_t = 38.0)]
+        to_mm: f64,
+        #[arg(long, default_value_t = 0.5)]
+        step_mm: f64,
+        /// The range judged (mm), as in issue 6: every node from z = 4 to 36 mm.
+        #[arg(long, default_value_t = 4.0)]
+        judge_from_mm: f64,
+        #[arg(long, default_value_t = 36.0)]
+        judge_to_mm: f64,
+    },
     /// Export A, B, C, D, node coordinates and the input/output maps as NumPy .npz.
     Export {
         #[command(flatten)]
@@ -151,6 +173,9 @@ pub fn run(cmd: Command) -> anyhow::Result<()> {
                 println!("report written to {}", out.display());
             }
         }
+        Command::Bond { model, force_n, from_mm, to_mm, step_mm, judge_from_mm, judge_to_mm } => {
+            bond(&model.to_params()?, force_n, [from_mm, to_mm, step_mm], [judge_from_mm, judge_to_mm])?;
+        }
         Command::Export { model, npz } => {
             let p = model.to_params()?;
             let m = StripModel::load_or_build(&p)?;
@@ -158,5 +183,45 @@ pub fn run(cmd: Command) -> anyhow::Result<()> {
             println!("exported order-{} model to {}", m.order(), npz.display());
         }
     }
+    Ok(())
+}
+
+/// `rig model bond`: prints the table and the weakest node of each support.
+fn bond(p: &StripParams, force_n: f64, roll_mm: [f64; 3], judged_mm: [f64; 2]) -> anyhow::Result<()> {
+    use crate::laying::{bond_check, bonded_min_force, BottomSupport, LayingModel};
+    use crate::report::BOND_PRESSURE_PA;
+    if !(force_n.is_finite() && force_n > 0.0) {
+        anyhow::bail!("--force-n {force_n}: give the pressing force as a positive number of newtons");
+    }
+    let [from, to, step] = roll_mm.map(|v| v * 1e-3);
+    if !(step > 0.0 && from < to && from >= 0.0 && to <= p.length_m) {
+        anyhow::bail!("--from-mm/--to-mm/--step-mm {roll_mm:?}: need 0 <= from < to <= strip length and step > 0");
+    }
+    let _progress = crate::progress::Progress::start("bond");
+    let m = LayingModel::build(p);
+    let (bonded, _) = bond_check(&m, -force_n, BottomSupport::BondedEverywhere, from, to, step)?;
+    let (front, lifted) = bond_check(&m, -force_n, BottomSupport::BondFront, from, to, step)?;
+    let need = bonded_min_force(&m, BOND_PRESSURE_PA, from, to, step)?;
+    drop(_progress);
+    println!(
+        "centre-line peak bottom pressure, wheel {force_n} N rolled z = {:.1}..{:.1} mm every {:.2} mm; bump {:.3} mm high, {:.1} mm wide at z = {:.1} mm",
+        roll_mm[0], roll_mm[1], roll_mm[2], p.bulge_amplitude_m * 1e3, p.bulge_width_m * 1e3, p.bulge_center_m * 1e3
+    );
+    println!("{:>7} {:>12} {:>16} {:>22}", "z (mm)", "bonded (kPa)", "laying (kPa)", "bonded needs (N)");
+    for ((b, f), n) in bonded.iter().zip(&front).zip(&need) {
+        println!("{:>7.1} {:>12.1} {:>16.1} {:>22.2}", b.0 * 1e3, b.1 * 1e-3, f.1 * 1e-3, n.1);
+    }
+    let judged = |q: &&(f64, f64)| q.0 >= judged_mm[0] * 1e-3 - 1e-9 && q.0 <= judged_mm[1] * 1e-3 + 1e-9;
+    let weakest = |v: &[(f64, f64)]| v.iter().filter(judged).fold((f64::NAN, f64::INFINITY), |w, q| if q.1 < w.1 { *q } else { w });
+    let share = |v: &[(f64, f64)]| {
+        let all: Vec<_> = v.iter().filter(judged).collect();
+        100.0 * all.iter().filter(|q| q.1 >= BOND_PRESSURE_PA).count() as f64 / all.len().max(1) as f64
+    };
+    let most = need.iter().filter(judged).fold((f64::NAN, 0.0), |w, q| if q.1 > w.1 { *q } else { w });
+    let (wb, wf) = (weakest(&bonded), weakest(&front));
+    println!("judged z = {:.1}..{:.1} mm, bond needs {:.0} kPa:", judged_mm[0], judged_mm[1], BOND_PRESSURE_PA * 1e-3);
+    println!("  bonded everywhere: weakest {:.1} kPa at z = {:.1} mm, {:.1} % of the nodes bond", wb.1 * 1e-3, wb.0 * 1e3, share(&bonded));
+    println!("  laying process:    weakest {:.1} kPa at z = {:.1} mm, {:.1} % of the nodes bond ({lifted} nodes lifted at most)", wf.1 * 1e-3, wf.0 * 1e3, share(&front));
+    println!("  bonded everywhere needs a constant {:.2} N (set by z = {:.1} mm)", most.1, most.0 * 1e3);
     Ok(())
 }

@@ -11,6 +11,7 @@ pub mod eig;
 pub mod error;
 pub mod export;
 pub mod fem;
+pub mod laying;
 pub mod mesh;
 pub mod model;
 pub mod params;
