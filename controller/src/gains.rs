@@ -86,6 +86,9 @@ pub struct Gains {
     pub force: ForceDesign,
     /// Anti-windup clamp on the integral's force contribution, N.
     pub integral_limit_n: f64,
+    /// Velocity feed-forward dF_r/dt / k_s along the normal (scenario
+    /// `controller.force_rate_feedforward`).
+    pub force_rate_feedforward: bool,
     /// Translational PD (x, z; y outside contact).
     pub kp_pos: f64,
     pub kd_pos: f64,
@@ -113,6 +116,7 @@ impl Gains {
         Gains {
             force,
             integral_limit_n: c.force_integral_limit_n,
+            force_rate_feedforward: c.force_rate_feedforward,
             kp_pos,
             kd_pos,
             kp_rot,

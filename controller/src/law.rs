@@ -169,7 +169,10 @@ impl ControlLaw {
         let pos_err = r.pos_m - kin.pos_task_m;
         let mut a_task = r.acc_mps2 + pos_err * g.kp_pos + (r.vel_mps - kin.vel_task_mps) * g.kd_pos;
         if r.force_mode {
-            a_task.y = impedance_accel(g, &mut self.integral_ns, r.force_y_n, force_meas_n, kin.vel_task_mps.y, dt);
+            // (6.3) damps the velocity relative to the one a changing set-point needs on a
+            // spring of the design stiffness: F_e = k_s y, so ẏ_r = Ḟ_r / k_s
+            let vel_ff = if g.force_rate_feedforward { r.force_rate_y_nps / g.force.strip_stiffness_n_per_m } else { 0.0 };
+            a_task.y = impedance_accel(g, &mut self.integral_ns, r.force_y_n, force_meas_n, kin.vel_task_mps.y - vel_ff, dt);
         } else {
             self.integral_ns = 0.0;
         }
@@ -253,6 +256,7 @@ mod tests {
             vel_mps: v,
             acc_mps2: Vector3::zeros(),
             force_y_n: 0.0,
+            force_rate_y_nps: 0.0,
             force_mode: false,
         };
         // Orientation: reference = current, angular velocity zero needed for zero error → use
@@ -308,6 +312,7 @@ mod tests {
             vel_mps: Vector3::zeros(),
             acc_mps2: Vector3::zeros(),
             force_y_n: 0.0,
+            force_rate_y_nps: 0.0,
             force_mode: false,
         };
         let (dt, sub) = (1e-3, 10);
@@ -329,6 +334,67 @@ mod tests {
         assert!(worst_overshoot < 0.02, "overshoot {worst_overshoot}");
     }
 
+    /// Runs the full 6-DOF loop against a spring wall of the design stiffness 2 mm below the
+    /// start height (F = k_s·penetration along task y, held per substep as J^T F) until the
+    /// reference reaches `until`; `each` sees every tick's time, reference and law output.
+    fn against_a_spring_wall(s: &Scenario, q0: Vec6, until: Phase, mut each: impl FnMut(f64, &TaskReference, &LawOutput)) {
+        let k_s = s.controller.strip_stiffness_n_per_m;
+        let mut law = ControlLaw::new(controller_robot(s), TaskFrame::from_scenario(s), Gains::from_scenario(s, 10.0), tool_down_rotation());
+        let mut gen = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
+        let surface_y = gen.params().start_task_m.y - 0.002;
+        let (mut q, mut qd) = (q0, Vec6::zeros());
+        let (dt, sub) = (1e-3, 10);
+        let force_on_tool = |law: &ControlLaw, q: &Vec6| -> Vec6 {
+            let y = law.kinematics(q, &Vec6::zeros()).pos_task_m.y;
+            let fb = law.task().vector_to_base(&Vector3::new(0.0, (k_s * (surface_y - y)).max(0.0), 0.0));
+            Vec6::new(fb.x, fb.y, fb.z, 0.0, 0.0, 0.0)
+        };
+        let mut t = 0.0;
+        while gen.phase() != until && t < 3.0 {
+            let kin = law.kinematics(&q, &qd);
+            let w = force_on_tool(&law, &q);
+            let r = gen.update(t, law.strip_force_y(&Vector3::new(w[0], w[1], w[2])), kin.pos_task_m.y);
+            let out = law.compute(&q, &qd, &kin, &w, &r, dt);
+            each(t, &r, &out);
+            for _ in 0..sub {
+                let w = force_on_tool(&law, &q);
+                let tau_total = out.tau + law.robot().jacobian_tcp(&q).transpose() * w;
+                rk4(law.robot(), &mut q, &mut qd, &tau_total, dt / sub as f64);
+            }
+            t += dt;
+        }
+        assert_eq!(gen.phase(), until, "never reached {until:?}");
+    }
+
+    /// Largest |F_e − F_r| over the last two thirds of the force ramp (ForceRamp phase) against
+    /// the spring wall.
+    fn ramp_error_against_a_spring(feedforward: bool) -> f64 {
+        let (mut s, _, q0) = setup();
+        s.controller.force_rate_feedforward = feedforward;
+        let (mut worst, mut ramp_start) = (0.0f64, None);
+        against_a_spring_wall(&s, q0, Phase::Dwell, |t, r, out| {
+            if r.phase == Phase::ForceRamp {
+                // after the first third: the touch-down transient (the approach speed hits the
+                // spring) has decayed, and the ramp's rate peaks at mid-ramp
+                let t0 = *ramp_start.get_or_insert(t);
+                if t - t0 > s.trajectory.force_ramp_s / 3.0 {
+                    worst = worst.max((out.force_meas_n - r.force_y_n).abs());
+                }
+            }
+        });
+        worst
+    }
+
+    /// The force ramp asks for a wheel velocity Ḟ_r/k_s. Without the feed-forward the loop lags
+    /// the ramp; with it, on a spring of exactly the design stiffness, what is left is the
+    /// impedance's own dynamics (m_d/b_d ~ 1 ms) and the sampling.
+    #[test]
+    fn force_rate_feedforward_removes_the_ramp_lag_on_a_spring() {
+        let (with, without) = (ramp_error_against_a_spring(true), ramp_error_against_a_spring(false));
+        assert!(without > 0.05, "the ramp should show a lag without feed-forward: {without} N");
+        assert!(with < 0.05 * without, "with feed-forward {with} N, without {without} N");
+    }
+
     /// 1-DOF spring contact closed-form check of the impedance law in the full 6-DOF loop: the
     /// robot presses on a stiff spring wall (F = k_s·penetration along task y) and the steady
     /// contact force must equal the reference (6.3)/(6.4) with and without integral action.
@@ -337,40 +403,8 @@ mod tests {
         for integral in [false, true] {
             let (mut s, _, q0) = setup();
             s.controller.force_integral = integral;
-            let k_s = s.controller.strip_stiffness_n_per_m;
-            let robot = controller_robot(&s);
-            let task = TaskFrame::from_scenario(&s);
-            let gains = Gains::from_scenario(&s, 10.0);
-            let mut law = ControlLaw::new(robot, task, gains, tool_down_rotation());
-            let mut gen = ReferenceGenerator::new(ReferenceParams::from_scenario(&s));
-            let surface_y = gen.params().start_task_m.y - 0.002;
-            let (mut q, mut qd) = (q0, Vec6::zeros());
-            let (dt, sub) = (1e-3, 10);
-            let force_on_tool = |law: &ControlLaw, q: &Vec6| -> Vec6 {
-                let y = law.kinematics(q, &Vec6::zeros()).pos_task_m.y;
-                let f_up = (k_s * (surface_y - y)).max(0.0);
-                let fb = law.task().vector_to_base(&Vector3::new(0.0, f_up, 0.0));
-                Vec6::new(fb.x, fb.y, fb.z, 0.0, 0.0, 0.0)
-            };
-            let mut t = 0.0;
             let mut last = 0.0;
-            while gen.phase() != Phase::Roll && t < 3.0 {
-                let kin = law.kinematics(&q, &qd);
-                let w = force_on_tool(&law, &q);
-                let fy = law.strip_force_y(&Vector3::new(w[0], w[1], w[2]));
-                let r = gen.update(t, fy, kin.pos_task_m.y);
-                let out = law.compute(&q, &qd, &kin, &w, &r, dt);
-                last = out.force_meas_n;
-                // Plant: forward dynamics with the spring wrench as J^T F (held per substep).
-                for _ in 0..sub {
-                    let w = force_on_tool(&law, &q);
-                    let j = law.robot().jacobian_tcp(&q);
-                    let tau_total = out.tau + j.transpose() * w;
-                    rk4(law.robot(), &mut q, &mut qd, &tau_total, dt / sub as f64);
-                }
-                t += dt;
-            }
-            assert_eq!(gen.phase(), Phase::Roll, "never reached the roll phase");
+            against_a_spring_wall(&s, q0, Phase::Roll, |_, _, out| last = out.force_meas_n);
             // (6.4): static force equals the reference; without integral it still does for a
             // pure spring (no velocity at rest).
             assert!((last - s.trajectory.force_ref_n).abs() < 0.05, "integral={integral}: {last}");

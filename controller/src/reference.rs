@@ -11,7 +11,7 @@
 //! continuous) so the PD feed-forward never sees steps.
 
 use nalgebra::Vector3;
-use scenario::Scenario;
+use scenario::{Scenario, MAX_FORCE_POINTS};
 
 use crate::model::STRIP_TOP_HEIGHT_M;
 
@@ -38,8 +38,9 @@ pub struct TaskReference {
     pub pos_m: Vector3<f64>,
     pub vel_mps: Vector3<f64>,
     pub acc_mps2: Vector3<f64>,
-    /// Force set-point on the strip along task y, N (negative = pressing).
+    /// Force set-point on the strip along task y, N (negative = pressing), and its rate, N/s.
     pub force_y_n: f64,
+    pub force_rate_y_nps: f64,
     /// True while task y is force controlled (hybrid impedance); false for position control.
     pub force_mode: bool,
 }
@@ -58,6 +59,10 @@ pub struct ReferenceParams {
     pub approach_max_descent_m: f64,
     pub contact_threshold_n: f64,
     pub force_ref_n: f64,
+    /// Force set-point along the strip as (z m, N) knots, the first `force_table_len` used; none
+    /// means `force_ref_n` throughout (scenario `trajectory.force_ref_along_z`).
+    pub force_table: [[f64; 2]; MAX_FORCE_POINTS],
+    pub force_table_len: usize,
     pub force_ramp_s: f64,
     pub dwell_s: f64,
     pub z_start_m: f64,
@@ -77,6 +82,10 @@ impl ReferenceParams {
         let t = &s.trajectory;
         let r = s.robot.wheel_radius_mm * 1e-3;
         let z_start_m = t.z_start_mm * 1e-3;
+        let mut force_table = [[0.0; 2]; MAX_FORCE_POINTS];
+        for (k, &[z_mm, f_n]) in force_table.iter_mut().zip(&t.force_ref_along_z) {
+            *k = [z_mm * 1e-3, f_n];
+        }
         ReferenceParams {
             start_task_m: Vector3::new(0.0, STRIP_TOP_HEIGHT_M + t.approach_height_mm * 1e-3 + r, z_start_m),
             settle_s: t.settle_s,
@@ -85,6 +94,8 @@ impl ReferenceParams {
             approach_max_descent_m: t.approach_height_mm * 1e-3 + APPROACH_OVERTRAVEL_M,
             contact_threshold_n: t.contact_threshold_n,
             force_ref_n: t.force_ref_n,
+            force_table,
+            force_table_len: t.force_ref_along_z.len().min(MAX_FORCE_POINTS),
             force_ramp_s: t.force_ramp_s,
             dwell_s: t.dwell_s,
             z_start_m,
@@ -93,6 +104,32 @@ impl ReferenceParams {
             ramp_down_s: t.ramp_down_s,
             lift_y_m: STRIP_TOP_HEIGHT_M + t.lift_mm * 1e-3 + r,
             lift_s: t.lift_s,
+        }
+    }
+}
+
+impl ReferenceParams {
+    /// Force set-point (N) with the wheel at strip position `z_m`: linear between the table's
+    /// knots, held beyond its ends; `force_ref_n` without a table.
+    pub fn force_at(&self, z_m: f64) -> f64 {
+        self.force_and_slope_at(z_m).0
+    }
+
+    /// [`Self::force_at`] and its slope along the strip (N/m). Between knots the force follows a
+    /// cosine blend, so the slope is continuous and zero at every knot (no velocity step in the
+    /// feed-forward of the rate).
+    pub fn force_and_slope_at(&self, z_m: f64) -> (f64, f64) {
+        let k = &self.force_table[..self.force_table_len];
+        match k {
+            [] => (self.force_ref_n, 0.0),
+            [first, ..] if z_m <= first[0] => (first[1], 0.0),
+            [.., last] if z_m >= last[0] => (last[1], 0.0),
+            _ => {
+                let i = k.partition_point(|p| p[0] <= z_m);
+                let ([z0, f0], [z1, f1]) = (k[i - 1], k[i]);
+                let (b, db, _) = cosine_blend((z_m - z0) / (z1 - z0));
+                (f0 + (f1 - f0) * b, (f1 - f0) * db / (z1 - z0))
+            }
         }
     }
 }
@@ -290,6 +327,7 @@ impl ReferenceGenerator {
             vel_mps: Vector3::zeros(),
             acc_mps2: Vector3::zeros(),
             force_y_n: 0.0,
+            force_rate_y_nps: 0.0,
             force_mode: false,
         };
         let z_end_offset = p.z_end_m - p.z_start_m;
@@ -309,13 +347,15 @@ impl ReferenceGenerator {
                 r.acc_mps2.y = -a;
             }
             Phase::ForceRamp => {
-                let (b, _, _) = cosine_blend(tau / p.force_ramp_s.max(1e-9));
-                r.force_y_n = self.force_at_contact_n + (p.force_ref_n - self.force_at_contact_n) * b;
+                let (b, db, _) = cosine_blend(tau / p.force_ramp_s.max(1e-9));
+                let step = p.force_at(p.z_start_m) - self.force_at_contact_n;
+                r.force_y_n = self.force_at_contact_n + step * b;
+                r.force_rate_y_nps = step * db / p.force_ramp_s.max(1e-9);
                 r.force_mode = true;
                 r.pos_m.y = self.y_at_contact_m;
             }
             Phase::Dwell => {
-                r.force_y_n = p.force_ref_n;
+                r.force_y_n = p.force_at(p.z_start_m);
                 r.force_mode = true;
                 r.pos_m.y = self.y_at_contact_m;
             }
@@ -324,14 +364,17 @@ impl ReferenceGenerator {
                 r.pos_m.z = s.z + z;
                 r.vel_mps.z = v;
                 r.acc_mps2.z = a;
-                r.force_y_n = p.force_ref_n;
+                let (f, slope) = p.force_and_slope_at(r.pos_m.z);
+                r.force_y_n = f;
+                r.force_rate_y_nps = slope * v;
                 r.force_mode = true;
                 r.pos_m.y = self.y_at_contact_m;
             }
             Phase::RampDown => {
-                let (b, _, _) = cosine_blend(tau / p.ramp_down_s.max(1e-9));
+                let (b, db, _) = cosine_blend(tau / p.ramp_down_s.max(1e-9));
                 r.pos_m.z = p.z_end_m;
-                r.force_y_n = p.force_ref_n * (1.0 - b);
+                r.force_y_n = p.force_at(p.z_end_m) * (1.0 - b);
+                r.force_rate_y_nps = -p.force_at(p.z_end_m) * db / p.ramp_down_s.max(1e-9);
                 r.force_mode = true;
                 r.pos_m.y = self.y_at_contact_m;
             }
@@ -501,5 +544,44 @@ mod tests {
         let mut g = ReferenceGenerator::new(p);
         g.reset_from(0.0, &(p.start_task_m + Vector3::new(0.0, 1e-4, 0.0)));
         assert_eq!(g.phase(), Phase::Settle);
+    }
+
+    #[test]
+    fn force_table_interpolates_holds_its_ends_and_drives_the_roll() {
+        let mut sc = Scenario::default();
+        sc.trajectory.force_ref_along_z = vec![[8.0, -10.0], [12.0, -14.0], [30.0, -12.0]];
+        let p = ReferenceParams::from_scenario(&sc);
+        assert_eq!(ReferenceParams::from_scenario(&Scenario::default()).force_at(0.011), -10.0);
+        assert_eq!(p.force_at(0.002), -10.0);
+        assert_eq!(p.force_at(0.012), -14.0);
+        assert!((p.force_at(0.010) + 12.0).abs() < 1e-12);
+        assert!((p.force_at(0.021) + 13.0).abs() < 1e-12);
+        assert_eq!(p.force_at(0.038), -12.0);
+        // Through the phases: the dwell presses with the table's force at z_start, the roll with
+        // the force at the reference's own z, and the ramp-down starts from the force at z_end.
+        let mut g = ReferenceGenerator::new(p);
+        let y = p.start_task_m.y;
+        g.update(0.0, 0.0, y);
+        let t_contact = p.settle_s + 0.01;
+        g.update(t_contact, -1.0, y);
+        let t_roll = t_contact + p.force_ramp_s + p.dwell_s;
+        let r = g.update(t_roll - 1e-6, -10.0, y);
+        assert_eq!((r.phase, r.force_y_n), (Phase::Dwell, -10.0));
+        // The rate is the time derivative of the set-point (central differences, step 1 µs).
+        let mut t = t_roll;
+        let mut last = r;
+        let h = 1e-6;
+        while t < t_roll + p.roll_s - h {
+            let r = g.update(t, -10.0, y);
+            assert_eq!(r.phase, Phase::Roll);
+            assert_eq!(r.force_y_n, p.force_at(r.pos_m.z));
+            let fd = (g.reference_at(t + h).force_y_n - g.reference_at(t - h).force_y_n) / (2.0 * h);
+            assert!((r.force_rate_y_nps - fd).abs() < 1e-4 * (1.0 + fd.abs()), "t {t}: rate {} vs {fd}", r.force_rate_y_nps);
+            last = r;
+            t += 1e-3;
+        }
+        let r = g.update(t_roll + p.roll_s + 1e-6, -12.0, y);
+        assert_eq!(r.phase, Phase::RampDown);
+        assert!((r.force_y_n - last.force_y_n).abs() < 1e-6, "ramp-down starts at {} after {}", r.force_y_n, last.force_y_n);
     }
 }

@@ -21,7 +21,7 @@ pub enum ScenarioError {
     #[error("scenario file {path}, line {line}, column {column}: {message}")]
     Parse { path: PathBuf, line: usize, column: usize, message: String },
     #[error("scenario file {path}: field `{field}` = {value}: {why}")]
-    Invalid { path: PathBuf, field: &'static str, value: String, why: &'static str },
+    Invalid { path: PathBuf, field: std::borrow::Cow<'static, str>, value: String, why: &'static str },
 }
 
 /// Loop mode of the plant (DESIGN section 6).
@@ -260,6 +260,10 @@ impl Default for ContactConfig {
     }
 }
 
+/// Most points `trajectory.force_ref_along_z` may hold (the controller keeps them in a fixed
+/// array: nothing is allocated on its 1 kHz path).
+pub const MAX_FORCE_POINTS: usize = 32;
+
 /// References (thesis Figure 6.6, plus approach and lift-off).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -274,6 +278,11 @@ pub struct TrajectoryConfig {
     pub contact_threshold_n: f64,
     /// Force set-point on the strip while rolling, N (negative = pressing, thesis sign).
     pub force_ref_n: f64,
+    /// Optional force set-point along the strip: `[[z_mm, force_n], ...]`, z strictly ascending,
+    /// linear in between and held beyond the ends. When given it replaces `force_ref_n` from the
+    /// force ramp to the ramp-down (a process plan that presses harder where the substrate's
+    /// shape eats the bond pressure; `rig model bond` computes what the strip needs).
+    pub force_ref_along_z: Vec<[f64; 2]>,
     /// Force ramp time, s.
     pub force_ramp_s: f64,
     /// Dwell at full force before rolling, s.
@@ -297,6 +306,7 @@ impl Default for TrajectoryConfig {
             approach_speed_mm_s: 10.0,
             contact_threshold_n: 0.5,
             force_ref_n: -10.0,
+            force_ref_along_z: Vec::new(),
             force_ramp_s: 0.3,
             dwell_s: 0.2,
             z_start_mm: 2.0,
@@ -321,6 +331,10 @@ pub struct ControllerConfig {
     pub force_integral_ratio: f64,
     /// Anti-windup clamp on the integral's contribution, N.
     pub force_integral_limit_n: f64,
+    /// Feed the force set-point's rate forward as the wheel velocity the strip's stiffness asks
+    /// for (dF_r/dt / strip_stiffness_n_per_m): a changing set-point is then followed without the
+    /// lag of the loop. The thesis has none.
+    pub force_rate_feedforward: bool,
     /// Translational PD bandwidth (other directions), Hz, and damping ratio.
     pub motion_bandwidth_hz: f64,
     pub motion_damping_ratio: f64,
@@ -342,6 +356,7 @@ impl Default for ControllerConfig {
             force_integral: true,
             force_integral_ratio: 0.2,
             force_integral_limit_n: 5.0,
+            force_rate_feedforward: true,
             motion_bandwidth_hz: 10.0,
             motion_damping_ratio: 1.0,
             rotation_bandwidth_hz: 10.0,
@@ -403,7 +418,7 @@ impl Scenario {
     pub fn validate(&self, path: &Path) -> Result<(), ScenarioError> {
         let bad = |field: &'static str, value: f64, why: &'static str| ScenarioError::Invalid {
             path: path.to_path_buf(),
-            field,
+            field: field.into(),
             value: value.to_string(),
             why,
         };
@@ -451,7 +466,7 @@ impl Scenario {
         if s.boundary != "bonded" && s.boundary != "sliding" {
             return Err(ScenarioError::Invalid {
                 path: path.to_path_buf(),
-                field: "strip.boundary",
+                field: "strip.boundary".into(),
                 value: format!("{:?}", s.boundary),
                 why: "must be \"bonded\" or \"sliding\"",
             });
@@ -462,6 +477,27 @@ impl Scenario {
         }
         if !(t.roll_s > 0.0) {
             return Err(bad("trajectory.roll_s", t.roll_s, "must be positive"));
+        }
+        if t.force_ref_along_z.len() > MAX_FORCE_POINTS {
+            return Err(bad("trajectory.force_ref_along_z", t.force_ref_along_z.len() as f64, "too many points (at most 32)"));
+        }
+        for (i, w) in t.force_ref_along_z.iter().enumerate() {
+            let [z_mm, f_n] = *w;
+            let point = |which: &str, value: f64, why: &'static str| ScenarioError::Invalid {
+                path: path.to_path_buf(),
+                field: format!("trajectory.force_ref_along_z[{i}] {which}").into(),
+                value: value.to_string(),
+                why,
+            };
+            if !(z_mm >= 0.0 && z_mm <= s.length_mm) {
+                return Err(point("z_mm", z_mm, "must lie on the strip [0, strip.length_mm]"));
+            }
+            if i > 0 && !(z_mm > t.force_ref_along_z[i - 1][0]) {
+                return Err(point("z_mm", z_mm, "must be strictly ascending"));
+            }
+            if !(f_n.is_finite() && f_n < 0.0 && f_n > -100.0) {
+                return Err(point("force_n", f_n, "must press: in (-100, 0) N"));
+            }
         }
         if !(self.controller.strip_stiffness_n_per_m > 0.0 && self.controller.strip_stiffness_n_per_m.is_finite()) {
             return Err(bad("controller.strip_stiffness_n_per_m", self.controller.strip_stiffness_n_per_m, "must be positive and finite"));
@@ -539,5 +575,24 @@ mod tests {
         let text = "[strip]\nboundary = \"glued\"\n";
         let e = Scenario::from_toml_str(text, Path::new("t.toml")).unwrap_err().to_string();
         assert!(e.contains("strip.boundary") && e.contains("glued"), "{e}");
+    }
+
+    #[test]
+    fn force_table_is_read_and_its_bad_points_are_named() {
+        let ok = "[trajectory]\nforce_ref_along_z = [[2, -10], [11, -13.5], [38, -10]]\n";
+        let s = Scenario::from_toml_str(ok, Path::new("t.toml")).unwrap();
+        assert_eq!(s.trajectory.force_ref_along_z, vec![[2.0, -10.0], [11.0, -13.5], [38.0, -10.0]]);
+        for (text, field, value) in [
+            ("[[2, -10], [2, -12]]", "force_ref_along_z[1] z_mm", "2"),
+            ("[[2, -10], [50, -12]]", "force_ref_along_z[1] z_mm", "50"),
+            ("[[2, 10]]", "force_ref_along_z[0] force_n", "10"),
+            ("[[2, nan]]", "force_ref_along_z[0] force_n", "NaN"),
+        ] {
+            let e = Scenario::from_toml_str(&format!("[trajectory]\nforce_ref_along_z = {text}\n"), Path::new("t.toml")).unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains(&format!("= {value}:")), "{text}: {e}");
+        }
+        let many: Vec<String> = (0..=MAX_FORCE_POINTS).map(|i| format!("[{i}, -10]")).collect();
+        let e = Scenario::from_toml_str(&format!("[trajectory]\nforce_ref_along_z = [{}]\n", many.join(", ")), Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("too many points"), "{e}");
     }
 }
