@@ -113,21 +113,37 @@ fn pressure_under_the_wheel(rec: &Recording, z_from: f64, z_to: f64) -> Vec<(f64
 
 /// The bond (Section 4.2, Appendix C) needs 100 kPa on the centre line under the wheel. At -10 N
 /// the bonded strip's tension over the bulge's flanks keeps some positions short of it (see the
-/// README); `scenarios/bond.toml` presses with -14 N, and then every node of the rolled length
-/// from z = 4 to 36 mm must see 100 kPa while the wheel is over it — and the force still tracks.
-#[test]
-fn pressing_with_14_n_bonds_the_whole_rolled_length() {
-    let path = scenario_file("bond.toml");
+/// README): every node of the rolled length from z = 4 to 36 mm must see 100 kPa while the wheel
+/// is over it, and the force must still track, in `file`.
+fn bonds_the_whole_rolled_length(file: &str) {
+    let path = scenario_file(file);
     let s = Scenario::load(&path).unwrap();
-    let rec = lockstep_servo_run("bond", &path);
+    let rec = lockstep_servo_run(file.trim_end_matches(".toml"), &path);
     let (max, rms, _) = rolling_tracking(&rec, &s);
-    assert!(max <= 0.10 && rms <= 0.03, "tracking at -14 N: max {max} N, RMS {rms} N");
+    assert!(max <= 0.10 && rms <= 0.03, "{file}: tracking max {max} N, RMS {rms} N");
     let under = pressure_under_the_wheel(&rec, 4e-3, 36e-3);
     assert!(under.len() >= 30, "only {} centre-line nodes between 4 and 36 mm", under.len());
     let weakest = under.iter().cloned().fold((0.0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
-    eprintln!("bond.toml: weakest centre-line pressure under the wheel {:.1} kPa at z = {:.1} mm", weakest.1 * 1e-3, weakest.0 * 1e3);
-    assert!(weakest.1 >= 100e3, "z = {} mm saw only {} Pa under the wheel", weakest.0 * 1e3, weakest.1);
+    eprintln!("{file}: weakest centre-line pressure under the wheel {:.1} kPa at z = {:.1} mm", weakest.1 * 1e-3, weakest.0 * 1e3);
+    assert!(weakest.1 >= 100e3, "{file}: z = {} mm saw only {} Pa under the wheel", weakest.0 * 1e3, weakest.1);
     // The report's share over the whole roll agrees.
     let share = recordings::report::numbers(&rec).rolling.and_then(|r| r.bond_pressure_share).unwrap();
-    assert!(share >= 0.999, "report: {share}");
+    assert!(share >= 0.999, "{file}: report: {share}");
+}
+
+/// `scenarios/bond.toml` presses with a constant -14 N.
+#[test]
+fn pressing_with_14_n_bonds_the_whole_rolled_length() {
+    bonds_the_whole_rolled_length("bond.toml");
+}
+
+/// `scenarios/bond_scheduled.toml` presses with -10 N where the substrate is flat and up to
+/// -13.5 N over the flanks (`trajectory.force_ref_along_z`, with the rate fed forward); the
+/// set-point actually varies along the roll.
+#[test]
+fn a_force_set_point_along_the_strip_bonds_the_whole_rolled_length() {
+    let s = Scenario::load(&scenario_file("bond_scheduled.toml")).unwrap();
+    let forces: Vec<f64> = s.trajectory.force_ref_along_z.iter().map(|k| k[1]).collect();
+    assert!(forces.iter().any(|&f| f == -10.0) && forces.iter().any(|&f| f < -13.0), "{forces:?}");
+    bonds_the_whole_rolled_length("bond_scheduled.toml");
 }
