@@ -14,6 +14,7 @@ fn main() -> anyhow::Result<()> {
         let tag = if integral { "integral" } else { "thesis  " };
         let mut s0 = base.clone();
         s0.controller.force_integral = integral;
+        s0.controller.force_rate_feedforward = integral; // the thesis controller has neither
         cases.push((format!("{tag} nominal (0.2 mm, 2 s, 1.0)"), s0.clone()));
         for h in [0.1, 0.4] {
             let mut s = s0.clone();
