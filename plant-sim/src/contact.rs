@@ -522,6 +522,15 @@ impl StripContact {
 mod tests {
     use super::*;
 
+    /// `rig model build`/`bond` without flags must describe the strip `rig run` simulates (the
+    /// shipped default scenario), so they share a cache entry and their figures apply.
+    #[test]
+    fn default_scenario_strip_is_the_strip_model_default() {
+        let s = Scenario::load(&Scenario::default_file()).unwrap();
+        assert_eq!(strip_params(&s), StripParams::default());
+        assert_eq!(strip_params(&s).cache_key(), StripParams::default().cache_key());
+    }
+
     /// A small model (20 mm, 2 mm elements, 40 states, 0.2 mm bulge at 10 mm), cached.
     fn coarse() -> StripModel {
         let p = StripParams {

@@ -71,8 +71,10 @@ impl Default for StripParams {
             cb_boundary: CbBoundary::Y,
             cb_cutoff_hz: 2500.0,
             order: 250,
-            bulge_amplitude_m: 0.1e-3,
-            bulge_width_m: 10e-3,
+            // the default scenario's bump (issue 6: 0.2 mm high, 10 mm half-width, at z = 20 mm),
+            // so `rig model` builds and checks the strip `rig run` uses
+            bulge_amplitude_m: 0.2e-3,
+            bulge_width_m: 20e-3,
             bulge_center_m: 20e-3,
         }
     }

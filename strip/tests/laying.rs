@@ -3,9 +3,9 @@
 use strip::laying::{bond_check, BottomSupport, LayingModel};
 use strip::{StripModel, StripParams};
 
-/// 2 mm mesh with the default scenario's bump (0.2 mm high, 20 mm wide, centred).
+/// 2 mm mesh with the default bump (0.2 mm high, 20 mm wide, centred: the default scenario's).
 fn params() -> StripParams {
-    StripParams { element_m: 2e-3, bulge_amplitude_m: 0.2e-3, bulge_width_m: 20e-3, ..Default::default() }
+    StripParams { element_m: 2e-3, ..Default::default() }
 }
 
 #[test]
