@@ -63,6 +63,8 @@ pub struct RollingNumbers {
     /// Share (0..1) of the rolled length where the centre-line bottom pressure under the wheel
     /// reached [`BOND_PRESSURE_PA`].
     pub bond_pressure_share: Option<f64>,
+    /// Weakest centre-line pressure under the wheel over the roll and where: [Pa, wheel z m].
+    pub bond_weakest_pa_at_z_m: Option<[f64; 2]>,
 }
 
 /// Events listed in the report (a run with more lists the first ones; the file has all).
@@ -210,13 +212,21 @@ fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
     let mut rolled = 0.0;
     let mut pressed = 0.0;
     let mut have_pressure = true;
+    let mut weakest: Option<[f64; 2]> = None;
     for &i in &roll {
         let dz = (rec.strip[i].wheel_z_m - rec.strip[i - 1].wheel_z_m).abs();
         rolled += dz;
-        match interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m) {
-            // Compression is positive (the plant's convention); tension never bonds.
-            Some(p) if p >= BOND_PRESSURE_PA => pressed += dz,
-            Some(_) => {}
+        let z = rec.strip[i].wheel_z_m;
+        match interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, z) {
+            Some(p) => {
+                // Compression is positive (the plant's convention); tension never bonds.
+                if p >= BOND_PRESSURE_PA {
+                    pressed += dz;
+                }
+                if weakest.is_none_or(|w| p < w[0]) {
+                    weakest = Some([p, z]);
+                }
+            }
             None => have_pressure = false,
         }
     }
@@ -229,6 +239,7 @@ fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
         force_error_rms_n: rms,
         force_error_mean_n: mean,
         bond_pressure_share: (have_pressure && rolled > 0.0).then(|| pressed / rolled),
+        bond_weakest_pa_at_z_m: weakest.filter(|_| have_pressure),
     })
 }
 
@@ -291,14 +302,16 @@ pub fn format_text(n: &ReportNumbers) -> String {
                 ),
                 _ => writeln!(s, "force err   no controller diagnostics (no force reference recorded)"),
             };
-            let _ = match r.bond_pressure_share {
-                Some(share) => writeln!(
+            let _ = match (r.bond_pressure_share, r.bond_weakest_pa_at_z_m) {
+                (Some(share), Some([p, z])) => writeln!(
                     s,
-                    "bond        {:.1} % of the rolled length saw >= {:.0} kPa on the centre line under the wheel",
+                    "bond        {:.1} % of the rolled length saw >= {:.0} kPa on the centre line under the wheel (weakest {:.1} kPa at z = {:.1} mm)",
                     share * 100.0,
-                    BOND_PRESSURE_PA * 1e-3
+                    BOND_PRESSURE_PA * 1e-3,
+                    p * 1e-3,
+                    z * 1e3
                 ),
-                None => writeln!(s, "bond        no centre-line pressure or node positions (metadata centreline_z_m) recorded"),
+                _ => writeln!(s, "bond        no centre-line pressure or node positions (metadata centreline_z_m) recorded"),
             };
         }
     }
