@@ -229,11 +229,7 @@ fn timing_scenario(dir: &Path, a: &TimingArgs) -> anyhow::Result<PathBuf> {
 }
 
 fn main() {
-    tracing_subscriber::fmt()
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_writer(std::io::stderr)
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .init();
+    messages::logging::init_stderr();
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Run(a) => (|| {

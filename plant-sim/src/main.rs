@@ -33,11 +33,7 @@ struct Args {
 }
 
 fn main() {
-    tracing_subscriber::fmt()
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_writer(std::io::stderr)
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .init();
+    messages::logging::init_stderr();
     let a = Args::parse();
     let opts = plant_sim::run::RunOptions {
         rig: a.rig.clone(),
