@@ -198,7 +198,7 @@ fn bond(p: &StripParams, force_n: f64, roll_mm: [f64; 3], judged_mm: [f64; 2]) -
         anyhow::bail!("--from-mm/--to-mm/--step-mm {roll_mm:?}: need 0 <= from < to <= strip length and step > 0");
     }
     let _progress = crate::progress::Progress::start("bond");
-    let m = LayingModel::build(p);
+    let m = LayingModel::build(p)?;
     let (bonded, _) = bond_check(&m, -force_n, BottomSupport::BondedEverywhere, from, to, step)?;
     let (front, lifted) = bond_check(&m, -force_n, BottomSupport::BondFront, from, to, step)?;
     let need = bonded_min_force(&m, BOND_PRESSURE_PA, from, to, step)?;

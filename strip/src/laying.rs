@@ -21,6 +21,8 @@ use crate::mesh::Mesh;
 use crate::model::gaussian_weights;
 use crate::params::StripParams;
 use crate::sparse::{Cholesky, Csc};
+use faer::linalg::solvers::Solve;
+use faer::Mat;
 
 /// How the bottom face is held while the wheel is at z_a.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -31,16 +33,31 @@ pub enum BottomSupport {
     BondFront,
 }
 
-/// The full model's stiffness and the bottom-face geometry, built once for many solves.
+/// The full model condensed onto the bottom face, built once for many solves.
+///
+/// Every support only holds bottom DOFs, so the interior (all other DOFs) is eliminated once:
+/// with K_II factored, the bottom face sees the Schur complement S = K_BB − K_BI K_II⁻¹ K_IB and
+/// the wheel's condensed load g_B = −K_BI K_II⁻¹ f_I; the reactions are r_B = S u_B − g_B. A solve
+/// is then a dense one on the free bottom DOFs only (none at all when everything is bonded).
 pub struct LayingModel {
     params: StripParams,
     mesh: Mesh,
-    k: Csc,
+    /// K restricted to (interior rows, bottom columns), and K_II's factor.
+    k_ib: Csc,
+    k_ii: Cholesky,
+    /// Interior index of each global DOF (usize::MAX on the bottom face).
+    interior_of: Vec<usize>,
+    /// Bottom DOFs 3 i + d (node `bottom_nodes[i]`, direction d): the Schur complement.
+    schur: Mat<f64>,
     bottom_nodes: Vec<usize>,
     bottom_areas_m2: Vec<f64>,
     top_nodes: Vec<usize>,
     top_xyz_m: Vec<[f64; 3]>,
 }
+
+/// Right-hand sides per solve while condensing (neighbouring bottom nodes, so the sparse
+/// forward substitution skips most supernodes).
+const SCHUR_CHUNK: usize = 48;
 
 /// One static solve.
 #[derive(Clone, Debug)]
@@ -56,15 +73,61 @@ pub struct LayingSolution {
 }
 
 impl LayingModel {
-    pub fn build(p: &StripParams) -> LayingModel {
+    pub fn build(p: &StripParams) -> Result<LayingModel> {
         let mesh = Mesh::build(p.length_m, p.element_m);
         let mat = Material { youngs_pa: p.youngs_pa, poisson: p.poisson, density_kg_m3: p.density_kg_m3 };
         let k = assemble(&mesh, &mat).k;
         let bottom_nodes = mesh.bottom_nodes();
+        let ndof = 3 * mesh.node_count();
+        let bottom: Vec<usize> = bottom_nodes.iter().flat_map(|&b| (0..3).map(move |d| 3 * b + d)).collect();
+        let mut bottom_of = vec![usize::MAX; ndof];
+        bottom.iter().enumerate().for_each(|(i, &d)| bottom_of[d] = i);
+        let interior: Vec<usize> = (0..ndof).filter(|&d| bottom_of[d] == usize::MAX).collect();
+        let mut interior_of = vec![usize::MAX; ndof];
+        interior.iter().enumerate().for_each(|(i, &d)| interior_of[d] = i);
+        let (ni, nb) = (interior.len(), bottom.len());
+        // K_II is the bonded strip's stiffness: positive definite
+        let k_ii = Cholesky::new(&k.submatrix(&interior_of, ni, &interior), "laying K_II")?;
+        let k_ib = k.submatrix(&interior_of, ni, &bottom);
+        let k_bb = k.submatrix(&bottom_of, nb, &bottom).to_dense();
+        // S = K_BB - K_IB^T K_II^-1 K_IB, column chunks shared by two threads
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let chunks: Vec<(usize, Mat<f64>)> = std::thread::scope(|scope| {
+            let work = || {
+                let mut done = Vec::new();
+                loop {
+                    let c0 = next.fetch_add(SCHUR_CHUNK, std::sync::atomic::Ordering::Relaxed);
+                    if c0 >= nb {
+                        break done;
+                    }
+                    let w = SCHUR_CHUNK.min(nb - c0);
+                    let mut x = Mat::<f64>::zeros(ni, w);
+                    for j in 0..w {
+                        for q in k_ib.col_ptr[c0 + j]..k_ib.col_ptr[c0 + j + 1] {
+                            x[(k_ib.row_idx[q], j)] = k_ib.val[q];
+                        }
+                    }
+                    k_ii.solve_sparse_rhs_in_place(x.as_mut());
+                    done.push((c0, k_ib.mul_t_dense(x.as_ref())));
+                }
+            };
+            let other = scope.spawn(work);
+            let mut mine = work();
+            mine.extend(other.join().expect("Schur thread panicked"));
+            mine
+        });
+        let mut schur = k_bb;
+        for (c0, kx) in chunks {
+            for j in 0..kx.ncols() {
+                for i in 0..nb {
+                    schur[(i, c0 + j)] -= kx[(i, j)];
+                }
+            }
+        }
         let bottom_areas_m2 = mesh.bottom_tributary_areas();
         let top_nodes = mesh.top_nodes();
         let top_xyz_m = top_nodes.iter().map(|&n| mesh.coords[n]).collect();
-        LayingModel { params: p.clone(), mesh, k, bottom_nodes, bottom_areas_m2, top_nodes, top_xyz_m }
+        Ok(LayingModel { params: p.clone(), mesh, k_ib, k_ii, interior_of, schur, bottom_nodes, bottom_areas_m2, top_nodes, top_xyz_m })
     }
 
     /// Tributary area of each bottom node (m^2), in `bottom_nodes` order.
@@ -87,77 +150,79 @@ impl LayingModel {
     /// Static solve for a wheel at `z_a_m` pressing with `force_y_n` (N, +y; pressing is
     /// negative), with the bottom held as `support` says.
     pub fn solve(&self, z_a_m: f64, force_y_n: f64, support: BottomSupport) -> Result<LayingSolution> {
-        let n = self.mesh.node_count();
-        let ndof = 3 * n;
-        let mut f = vec![0.0; ndof];
+        let nb = self.schur.nrows();
+        // condensed wheel load g_B = -K_BI K_II^-1 f_I (the wheel loads top nodes only)
+        let mut y = vec![0.0; self.k_ib.nrows];
         let mut w = vec![0.0; self.top_nodes.len()];
         gaussian_weights(&self.top_xyz_m, z_a_m, &mut w);
         for (&node, wi) in self.top_nodes.iter().zip(&w) {
-            f[3 * node + 1] += force_y_n * wi;
+            y[self.interior_of[3 * node + 1]] += force_y_n * wi;
         }
+        self.k_ii.solve_vec(&mut y);
+        let g = -self.k_ib.mul_t_dense(faer::MatRef::from_column_major_slice(&y, y.len(), 1));
         // a small tolerance keeps the node under the wheel's centre on the resting side
-        let bonded = |z: f64| support == BottomSupport::BondedEverywhere || z < z_a_m - 1e-9;
+        let bonded: Vec<bool> = self
+            .bottom_nodes
+            .iter()
+            .map(|&b| support == BottomSupport::BondedEverywhere || self.mesh.coords[b][2] < z_a_m - 1e-9)
+            .collect();
         let bump: Vec<f64> = self.bottom_nodes.iter().map(|&b| self.params.bulge_height_m(self.mesh.coords[b][2])).collect();
         // every resting node starts in contact
         let mut touching = vec![true; self.bottom_nodes.len()];
         for iteration in 1..=200 {
-            // prescribed DOFs and their values
-            let mut prescribed = vec![None; ndof];
-            for (i, &b) in self.bottom_nodes.iter().enumerate() {
-                if bonded(self.mesh.coords[b][2]) {
-                    prescribed[3 * b] = Some(0.0);
-                    prescribed[3 * b + 2] = Some(0.0);
-                    prescribed[3 * b + 1] = Some(bump[i]);
-                } else if touching[i] {
-                    prescribed[3 * b + 1] = Some(bump[i]);
+            // held bottom DOFs and their values; the rest are solved for
+            let mut u = vec![0.0; nb];
+            let mut free = Vec::new();
+            for i in 0..self.bottom_nodes.len() {
+                if bonded[i] || touching[i] {
+                    u[3 * i + 1] = bump[i];
+                }
+                if !bonded[i] {
+                    free.extend([3 * i, 3 * i + 2]);
+                    if !touching[i] {
+                        free.push(3 * i + 1);
+                    }
                 }
             }
-            let u = self.solve_prescribed(&f, &prescribed)?;
-            // reactions on the strip: r = K u - f at the bottom y DOFs
-            let mut ku = vec![0.0; ndof];
-            self.k.mul_vec(&u, &mut ku);
-            let reaction: Vec<f64> = self.bottom_nodes.iter().map(|&b| ku[3 * b + 1] - f[3 * b + 1]).collect();
+            if !free.is_empty() {
+                // S_ff u_f = g_f - S_fc u_c  (u_f is zero in u so far)
+                let nf = free.len();
+                let s_ff = Mat::<f64>::from_fn(nf, nf, |a, b| self.schur[(free[a], free[b])]);
+                let mut rhs = Mat::<f64>::from_fn(nf, 1, |a, _| {
+                    let r = free[a];
+                    g[(r, 0)] - (0..nb).map(|c| self.schur[(r, c)] * u[c]).sum::<f64>()
+                });
+                s_ff.llt(faer::Side::Lower)
+                    .map_err(|e| numeric("laying contact", format!("condensed stiffness not positive definite ({e:?}) at z_a = {z_a_m} m")))?
+                    .solve_in_place(rhs.as_mut());
+                free.iter().enumerate().for_each(|(a, &r)| u[r] = rhs[(a, 0)]);
+            }
+            // reactions on the strip at the bottom y DOFs: r = S u - g
+            let reaction: Vec<f64> =
+                (0..self.bottom_nodes.len()).map(|i| (0..nb).map(|c| self.schur[(3 * i + 1, c)] * u[c]).sum::<f64>() - g[(3 * i + 1, 0)]).collect();
             let mut changed = false;
-            for (i, &b) in self.bottom_nodes.iter().enumerate() {
-                if bonded(self.mesh.coords[b][2]) {
+            for i in 0..self.bottom_nodes.len() {
+                if bonded[i] {
                     continue;
                 }
-                // tolerances far below the pressures and gaps of interest (1 Pa on a 1 mm^2 node,
-                // 1 nm), so the active set cannot chatter on round-off
+                // tolerances far below the pressures and gaps of interest (1 Pa, 1 nm), so the
+                // active set cannot chatter on round-off
                 if touching[i] && reaction[i] / self.bottom_areas_m2[i] < -1.0 {
                     touching[i] = false;
                     changed = true;
-                } else if !touching[i] && u[3 * b + 1] < bump[i] - 1e-9 {
+                } else if !touching[i] && u[3 * i + 1] < bump[i] - 1e-9 {
                     touching[i] = true;
                     changed = true;
                 }
             }
             if !changed {
-                let lifted = touching.iter().enumerate().filter(|&(i, &t)| !t && !bonded(self.mesh.coords[self.bottom_nodes[i]][2])).count();
+                let lifted = (0..touching.len()).filter(|&i| !touching[i] && !bonded[i]).count();
                 let pressure_pa = reaction.iter().zip(&self.bottom_areas_m2).map(|(r, a)| r / a).collect();
-                let gap_m = self.bottom_nodes.iter().zip(&bump).map(|(&b, h)| u[3 * b + 1] - h).collect();
+                let gap_m = (0..bump.len()).map(|i| u[3 * i + 1] - bump[i]).collect();
                 return Ok(LayingSolution { pressure_pa, gap_m, lifted, iterations: iteration });
             }
         }
         Err(numeric("laying contact", format!("active set did not settle in 200 iterations at z_a = {z_a_m} m")))
-    }
-
-    /// Solves K u = f with the DOFs in `prescribed` held at their values (exact elimination).
-    fn solve_prescribed(&self, f: &[f64], prescribed: &[Option<f64>]) -> Result<Vec<f64>> {
-        let ndof = f.len();
-        let free: Vec<usize> = (0..ndof).filter(|&d| prescribed[d].is_none()).collect();
-        let mut free_of = vec![usize::MAX; ndof];
-        free.iter().enumerate().for_each(|(i, &d)| free_of[d] = i);
-        let u_c: Vec<f64> = prescribed.iter().map(|p| p.unwrap_or(0.0)).collect();
-        // rhs = f_f - K_fc u_c  (K u_c has zeros in the free entries of u_c)
-        let mut k_uc = vec![0.0; ndof];
-        self.k.mul_vec(&u_c, &mut k_uc);
-        let mut rhs: Vec<f64> = free.iter().map(|&d| f[d] - k_uc[d]).collect();
-        let k_ff = self.k.submatrix(&free_of, free.len(), &free);
-        Cholesky::new(&k_ff, "laying statics")?.solve_vec(&mut rhs);
-        let mut u = u_c;
-        free.iter().zip(&rhs).for_each(|(&d, v)| u[d] = *v);
-        Ok(u)
     }
 }
 

@@ -14,7 +14,7 @@ fn bonded_everywhere_equals_the_reduced_models_statics() {
     // bulge offset (prescribed bottom motion) and the matched-DC reduced model's y(0) = (D - C A^-1 B) u.
     let p = params();
     let model = StripModel::build(&p).unwrap();
-    let laying = LayingModel::build(&p);
+    let laying = LayingModel::build(&p).unwrap();
     let (z_a, force) = (11e-3, -10.0);
     let sol = laying.solve(z_a, force, BottomSupport::BondedEverywhere).unwrap();
     let mut w = vec![0.0; model.n_top()];
@@ -34,7 +34,7 @@ fn bonded_everywhere_equals_the_reduced_models_statics() {
 fn reactions_balance_the_wheel_force() {
     // Nothing else loads the strip: the substrate's reactions sum to minus the wheel force, for
     // either support (the bump alone is self-equilibrated).
-    let laying = LayingModel::build(&params());
+    let laying = LayingModel::build(&params()).unwrap();
     let areas = laying.bottom_areas_m2().to_vec();
     for support in [BottomSupport::BondedEverywhere, BottomSupport::BondFront] {
         for (z_a, force) in [(12e-3, -10.0), (27e-3, -14.0), (20e-3, 0.0)] {
@@ -50,7 +50,7 @@ fn reactions_balance_the_wheel_force() {
 fn bond_front_satisfies_signorini_conditions() {
     // Ahead of the wheel: no tension where the strip touches, no pressure where a gap opened, and
     // no penetration anywhere. The bump must actually open gaps (else the test would not test).
-    let laying = LayingModel::build(&params());
+    let laying = LayingModel::build(&params()).unwrap();
     let z = laying.bottom_z_m();
     let mut any_lifted = false;
     for z_a in [6e-3, 12e-3, 20e-3, 28e-3] {
@@ -80,7 +80,7 @@ fn releasing_the_strip_ahead_of_the_wheel_raises_the_weakest_bond_pressure() {
     // below 100 kPa at -10 N on the bump's flanks (the finding of issue 6), and the weakest point
     // lies on a flank, not on the crest.
     let p = params();
-    let laying = LayingModel::build(&p);
+    let laying = LayingModel::build(&p).unwrap();
     let weakest = |v: &[(f64, f64)]| v.iter().filter(|q| (4e-3..=36e-3).contains(&q.0)).fold((0.0, f64::INFINITY), |w, q| if q.1 < w.1 { *q } else { w });
     let (bonded, _) = bond_check(&laying, -10.0, BottomSupport::BondedEverywhere, 2e-3, 38e-3, 2e-3).unwrap();
     let (front, lifted) = bond_check(&laying, -10.0, BottomSupport::BondFront, 2e-3, 38e-3, 2e-3).unwrap();
@@ -98,7 +98,7 @@ fn releasing_the_strip_ahead_of_the_wheel_raises_the_weakest_bond_pressure() {
 fn bonded_min_force_reaches_the_level_exactly() {
     // Superposition check: rolling with the computed force for the weakest node gives that node
     // exactly the level, and 1 % less force leaves it short.
-    let laying = LayingModel::build(&params());
+    let laying = LayingModel::build(&params()).unwrap();
     let need = strip::laying::bonded_min_force(&laying, 100e3, 2e-3, 38e-3, 2e-3).unwrap();
     let (z, f) = need.iter().filter(|q| (4e-3..=36e-3).contains(&q.0)).fold((0.0, 0.0), |m, q| if q.1 > m.1 { *q } else { m });
     assert!(f > 10.0, "the bump's flanks need more than the default 10 N, got {f} N at z {z}");
