@@ -3,11 +3,14 @@
 //! - `rig run [SCENARIO.toml] [--mode realtime|lockstep] [--controller PATH] [--duration S] [--out DIR]`
 //!   starts `plant-sim` and a controller on a fresh rig name, supervises them and prints a summary.
 //! - `rig timing [--seconds N]`: a real-time timing run with latency and jitter distributions.
+//! - `rig sweep [SCENARIO.toml] --set section.field=v1,v2,... [--grid]`: a parameter study, one
+//!   lockstep run per case, tabulated from the recordings.
 //! - `rig robot ...`, `rig model ...`, `rig replay`, `rig report`, `rig design`: the tools of the
 //!   robot, strip, recordings and design crates.
 
 mod summary;
 mod supervise;
+mod sweep;
 
 use std::path::{Path, PathBuf};
 
@@ -28,6 +31,8 @@ enum Cmd {
     Run(RunArgs),
     /// Real-time timing run: round-trip latency, tick-period jitter, misses, compute times.
     Timing(TimingArgs),
+    /// Parameter study: one lockstep run per case (scenario fields overridden), one table.
+    Sweep(SweepArgs),
     /// Robot model tools.
     Robot {
         #[command(subcommand)]
@@ -53,14 +58,22 @@ struct RunArgs {
     /// Loop mode, overriding the scenario's.
     #[arg(long, value_parser = ["realtime", "lockstep"])]
     mode: Option<String>,
+    #[command(flatten)]
+    launch: LaunchArgs,
+}
+
+/// What `rig run` and `rig sweep` start and where they write.
+#[derive(Debug, clap::Args)]
+struct LaunchArgs {
     /// Controller executable (default: `controller` next to `rig`). Any program that takes
     /// `--rig NAME --scenario FILE` and speaks the contract of messages/README.md.
     #[arg(long)]
     controller: Option<PathBuf>,
-    /// Simulated seconds to run (default: the scenario's).
+    /// Simulated seconds to run, per case for a sweep (default: the scenario's).
     #[arg(long)]
     duration: Option<f64>,
-    /// Output directory (default: runs/<UTC time>-<rig>/); the recording is <DIR>/run.mcap.
+    /// Output directory (run: runs/<UTC time>-<rig>/, the recording is <DIR>/run.mcap; sweep:
+    /// runs/sweep-<UTC time>/ with case-NN/{scenario.toml,run.mcap} and sweep.json).
     #[arg(long)]
     out: Option<PathBuf>,
 }
@@ -92,6 +105,20 @@ struct TimingArgs {
     /// Let idle CPUs halt (do not hold /dev/cpu_dma_latency at 0; scenario `loop.idle_poll`).
     #[arg(long)]
     no_idle_poll: bool,
+}
+
+#[derive(Debug, clap::Args)]
+struct SweepArgs {
+    /// Base scenario (default: scenarios/default.toml).
+    scenario: Option<PathBuf>,
+    /// An axis: `section.field=v1,v2,...` (scenario field, TOML scalar values). Repeat for more.
+    #[arg(long = "set", required = true, value_parser = sweep::parse_axis)]
+    axes: Vec<sweep::Axis>,
+    /// Every combination of the axes' values (default: each axis varied alone around the base).
+    #[arg(long)]
+    grid: bool,
+    #[command(flatten)]
+    launch: LaunchArgs,
 }
 
 /// UTC time as `YYYYmmdd-HHMMSS`.
@@ -143,6 +170,7 @@ fn prepare(
         cache_dir,
         // Same CPU as plant-sim's lockstep loop.
         controller_cpu: lockstep.then(plant_sim::rt::lockstep_cpu),
+        quiet: false,
     })
 }
 
@@ -228,6 +256,50 @@ fn timing_scenario(dir: &Path, a: &TimingArgs) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
+/// `rig sweep`: every case in lockstep, then the table; exit 0 only if every case completed.
+fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
+    let base_path = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
+    let base = sweep::load_base(&base_path)?;
+    let dir = a.launch.out.unwrap_or_else(|| Path::new("runs").join(format!("sweep-{}", utc_stamp())));
+    let cases = sweep::cases(&a.axes, a.grid);
+    let rt = runtime()?;
+    let mut results = Vec::with_capacity(cases.len());
+    for (n, case) in cases.iter().enumerate() {
+        let case_dir = dir.join(format!("case-{n:02}"));
+        std::fs::create_dir_all(&case_dir).with_context(|| format!("creating {}", case_dir.display()))?;
+        let path = case_dir.join("scenario.toml");
+        let label = sweep::label(&a.axes, case);
+        let mut doc = sweep::case_scenario(&base, &a.axes, case);
+        doc.insert("description".into(), format!("rig sweep case {n}: {} with {label}", base_path.display()).into());
+        std::fs::write(&path, toml::to_string(&doc)?).with_context(|| format!("writing {}", path.display()))?;
+        let mut l = prepare(supervise::unique_rig_name(), path.clone(), Some("lockstep".into()), a.launch.duration, Some(case_dir), a.launch.controller.clone())?;
+        l.quiet = true;
+        eprintln!("rig sweep: case {}/{}: {label}", n + 1, cases.len());
+        let outcome = rt.block_on(supervise::supervise(&l))?;
+        let summary = outcome.plant_summary.as_ref();
+        let numbers = recordings::cli::summary_numbers(&l.recording).ok();
+        let rolling = numbers.as_ref().and_then(|n| n.rolling.clone());
+        results.push(sweep::CaseResult {
+            label,
+            scenario: path,
+            recording: l.recording.clone(),
+            exit_code: outcome.ending.exit_code(),
+            misses: summary.and_then(|v| v.get("misses")).and_then(serde_json::Value::as_u64),
+            safe_stops: summary.and_then(|v| v.get("safe_stops")).and_then(serde_json::Value::as_u64),
+            force_error_max_n: rolling.as_ref().and_then(|r| r.force_error_max_abs_n),
+            force_error_rms_n: rolling.as_ref().and_then(|r| r.force_error_rms_n),
+            bond_share: rolling.as_ref().and_then(|r| r.bond_pressure_share),
+            bond_weakest_pa: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[0]),
+            bond_weakest_z_m: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[1]),
+        });
+    }
+    print!("{}", sweep::table(&results));
+    let json = dir.join("sweep.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&results)?).with_context(|| format!("writing {}", json.display()))?;
+    println!("cases, recordings and {} in {}", json.file_name().unwrap_or_default().to_string_lossy(), dir.display());
+    Ok(if results.iter().all(|r| r.exit_code == 0) { 0 } else { 1 })
+}
+
 fn main() {
     messages::logging::init_stderr();
     let cli = Cli::parse();
@@ -235,7 +307,7 @@ fn main() {
         Cmd::Run(a) => (|| {
             let rig = supervise::unique_rig_name();
             let scenario = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
-            let l = prepare(rig, scenario, a.mode, a.duration, a.out, a.controller)?;
+            let l = prepare(rig, scenario, a.mode, a.launch.duration, a.launch.out, a.launch.controller)?;
             launch_and_report(&l, false, None)
         })(),
         Cmd::Timing(a) => (|| {
@@ -254,6 +326,7 @@ fn main() {
             let l = prepare(rig, scenario, Some("realtime".into()), Some(a.seconds), Some(dir), a.controller)?;
             launch_and_report(&l, true, a.json.as_deref())
         })(),
+        Cmd::Sweep(a) => run_sweep(a),
         Cmd::Robot { cmd } => robot::cli::run(cmd).map(|_| 0),
         Cmd::Model { cmd } => strip::cli::run(cmd).map(|_| 0),
         Cmd::Replay(a) => recordings::cli::replay(a).map(|_| 0),

@@ -23,6 +23,8 @@ pub struct RigLaunch {
     pub cache_dir: PathBuf,
     /// Lockstep: start the controller pinned to this CPU, the one `plant-sim` pins its loop to.
     pub controller_cpu: Option<usize>,
+    /// Daemons log warnings and errors only (unless RUST_LOG says otherwise): for `rig sweep`.
+    pub quiet: bool,
 }
 
 /// How a supervised run ended.
@@ -137,6 +139,10 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
         .arg(&l.cache_dir)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
+    let quiet = l.quiet && std::env::var_os("RUST_LOG").is_none();
+    if quiet {
+        plant_cmd.env("RUST_LOG", "warn");
+    }
     if let Some(m) = &l.mode {
         plant_cmd.arg("--mode").arg(m);
     }
@@ -153,6 +159,9 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
 
     let mut ctrl_cmd = Command::new(&l.controller_bin);
     ctrl_cmd.arg("--rig").arg(&l.rig).arg("--scenario").arg(&l.scenario).stdout(Stdio::inherit()).stderr(Stdio::inherit());
+    if quiet {
+        ctrl_cmd.env("RUST_LOG", "warn");
+    }
     if let Some(cpu) = l.controller_cpu {
         // SAFETY: between fork and exec only sched_setaffinity (async-signal-safe) runs.
         unsafe {

@@ -1,0 +1,157 @@
+//! `rig sweep`: a parameter study with the real daemons. Each case is the base scenario with some
+//! fields overridden (`--set section.field=v1,v2,...`), run in lockstep (deterministic: the same
+//! case gives the same numbers as `rig run --mode lockstep` of that scenario), and read back from
+//! its recording. One `--set` per axis; by default each axis is varied alone around the base
+//! scenario (a robustness table), with `--grid` over every combination.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use serde::Serialize;
+
+/// One axis of the study: a dotted scenario field and the values it takes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Axis {
+    pub section: String,
+    pub field: String,
+    pub values: Vec<toml::Value>,
+}
+
+/// Parses `section.field=v1,v2,...`; values are TOML scalars (numbers, booleans, quoted or bare
+/// strings).
+pub fn parse_axis(s: &str) -> anyhow::Result<Axis> {
+    let (key, values) = s.split_once('=').with_context(|| format!("--set {s:?}: expected section.field=v1,v2,..."))?;
+    let (section, field) = key.split_once('.').with_context(|| format!("--set {s:?}: the field needs its section, e.g. bulge.height_mm"))?;
+    anyhow::ensure!(!section.is_empty() && !field.is_empty() && !field.contains('.'), "--set {s:?}: expected section.field");
+    let values: Vec<toml::Value> = values
+        .split(',')
+        .map(|v| {
+            let v = v.trim();
+            anyhow::ensure!(!v.is_empty(), "--set {s:?}: empty value");
+            // a TOML scalar if it parses as one, else a bare string
+            Ok(format!("x = {v}").parse::<toml::Table>().ok().and_then(|mut t| t.remove("x")).unwrap_or_else(|| toml::Value::String(v.into())))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    Ok(Axis { section: section.into(), field: field.into(), values })
+}
+
+/// The cases: each a list of (axis index, value index).
+pub fn cases(axes: &[Axis], grid: bool) -> Vec<Vec<(usize, usize)>> {
+    if grid {
+        let mut out: Vec<Vec<(usize, usize)>> = vec![Vec::new()];
+        for (a, axis) in axes.iter().enumerate() {
+            out = out.into_iter().flat_map(|c| (0..axis.values.len()).map(move |v| [c.clone(), vec![(a, v)]].concat())).collect();
+        }
+        out
+    } else {
+        axes.iter().enumerate().flat_map(|(a, axis)| (0..axis.values.len()).map(move |v| vec![(a, v)])).collect()
+    }
+}
+
+/// The base scenario's TOML with the case's fields overridden.
+pub fn case_scenario(base: &toml::Table, axes: &[Axis], case: &[(usize, usize)]) -> toml::Table {
+    let mut doc = base.clone();
+    for &(a, v) in case {
+        let axis = &axes[a];
+        let section = doc.entry(axis.section.clone()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        if let toml::Value::Table(t) = section {
+            t.insert(axis.field.clone(), axis.values[v].clone());
+        }
+    }
+    doc
+}
+
+/// What one case measured (from its recording and the plant's summary).
+#[derive(Debug, Clone, Serialize)]
+pub struct CaseResult {
+    pub label: String,
+    pub scenario: PathBuf,
+    pub recording: PathBuf,
+    pub exit_code: i32,
+    pub misses: Option<u64>,
+    pub safe_stops: Option<u64>,
+    pub force_error_max_n: Option<f64>,
+    pub force_error_rms_n: Option<f64>,
+    pub bond_share: Option<f64>,
+    pub bond_weakest_pa: Option<f64>,
+    pub bond_weakest_z_m: Option<f64>,
+}
+
+/// `label` of a case: `section.field=value` joined by spaces.
+pub fn label(axes: &[Axis], case: &[(usize, usize)]) -> String {
+    case.iter().map(|&(a, v)| format!("{}.{}={}", axes[a].section, axes[a].field, axes[a].values[v])).collect::<Vec<_>>().join(" ")
+}
+
+/// The table `rig sweep` prints (markdown).
+pub fn table(results: &[CaseResult]) -> String {
+    let f = |v: Option<f64>, scale: f64, digits: usize| v.map_or("—".to_string(), |x| format!("{:.*}", digits, x * scale));
+    let mut s = String::from("| case | exit | misses | force err max (N) | RMS (N) | bond ≥ 100 kPa | weakest under the wheel |\n| --- | --- | --- | --- | --- | --- | --- |\n");
+    for r in results {
+        let weakest = match (r.bond_weakest_pa, r.bond_weakest_z_m) {
+            (Some(p), Some(z)) => format!("{:.1} kPa at z = {:.1} mm", p * 1e-3, z * 1e3),
+            _ => "—".into(),
+        };
+        s += &format!(
+            "| {} | {} | {} | {} | {} | {} % | {} |\n",
+            r.label,
+            r.exit_code,
+            r.misses.map_or("—".into(), |m| m.to_string()),
+            f(r.force_error_max_n, 1.0, 3),
+            f(r.force_error_rms_n, 1.0, 3),
+            f(r.bond_share, 100.0, 1),
+            weakest
+        );
+    }
+    s
+}
+
+/// Reads a base scenario as a TOML table (validated as a scenario first, so errors name it).
+pub fn load_base(path: &Path) -> anyhow::Result<toml::Table> {
+    scenario::Scenario::load(path)?;
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(text.parse().with_context(|| format!("parsing {}", path.display()))?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axes_parse_scalars_and_name_bad_input() {
+        let a = parse_axis("bulge.height_mm=0.1,0.4").unwrap();
+        assert_eq!((a.section.as_str(), a.field.as_str()), ("bulge", "height_mm"));
+        assert_eq!(a.values, vec![toml::Value::Float(0.1), toml::Value::Float(0.4)]);
+        let b = parse_axis("controller.force_integral=true,false").unwrap();
+        assert_eq!(b.values, vec![toml::Value::Boolean(true), toml::Value::Boolean(false)]);
+        let c = parse_axis("strip.boundary=bonded,\"sliding\"").unwrap();
+        assert_eq!(c.values, vec![toml::Value::String("bonded".into()), toml::Value::String("sliding".into())]);
+        for bad in ["height_mm=1", "bulge.height_mm", "bulge.height_mm=1,,2", ".x=1"] {
+            let e = parse_axis(bad).unwrap_err().to_string();
+            assert!(e.contains(bad), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn one_at_a_time_and_grid_counts() {
+        let axes = vec![parse_axis("a.x=1,2,3").unwrap(), parse_axis("b.y=4,5").unwrap()];
+        assert_eq!(cases(&axes, false).len(), 3 + 2);
+        let g = cases(&axes, true);
+        assert_eq!(g.len(), 3 * 2);
+        assert!(g.iter().all(|c| c.len() == 2 && c[0].0 == 0 && c[1].0 == 1));
+        let mut seen: Vec<_> = g.iter().map(|c| (c[0].1, c[1].1)).collect();
+        seen.dedup();
+        assert_eq!(seen.len(), 6, "every combination once");
+    }
+
+    #[test]
+    fn a_case_overrides_only_its_fields() {
+        let base: toml::Table = "[bulge]\nheight_mm = 0.2\ncenter_mm = 20\n[loop]\nmode = \"realtime\"\n".parse().unwrap();
+        let axes = vec![parse_axis("bulge.height_mm=0.4").unwrap(), parse_axis("trajectory.roll_s=1").unwrap()];
+        let doc = case_scenario(&base, &axes, &[(0, 0), (1, 0)]);
+        assert_eq!(doc["bulge"]["height_mm"].as_float(), Some(0.4));
+        assert_eq!(doc["bulge"]["center_mm"].as_integer(), Some(20));
+        assert_eq!(doc["trajectory"]["roll_s"].as_integer(), Some(1));
+        assert_eq!(doc["loop"]["mode"].as_str(), Some("realtime"));
+        assert_eq!(label(&axes, &[(0, 0), (1, 0)]), "bulge.height_mm=0.4 trajectory.roll_s=1");
+    }
+}
