@@ -5,7 +5,7 @@
 //! - `rig timing [--seconds N]`: a real-time timing run with latency and jitter distributions.
 //! - `rig sweep [SCENARIO.toml] --set section.field=v1,v2,... [--grid]`: a parameter study, one
 //!   lockstep run per case, tabulated from the recordings.
-//! - `rig robot ...`, `rig model ...`, `rig replay`, `rig report`, `rig design`: the tools of the
+//! - `rig robot ...`, `rig model ...`, `rig replay`, `rig report`, `rig compare`, `rig design`: the tools of the
 //!   robot, strip, recordings and design crates.
 
 mod summary;
@@ -47,6 +47,8 @@ enum Cmd {
     Replay(recordings::cli::ReplayArgs),
     /// Figures and numbers from a recording.
     Report(recordings::cli::ReportArgs),
+    /// Several recordings side by side: one table, the rolling phase overlaid.
+    Compare(recordings::cli::CompareArgs),
     /// Force-loop design from the actual models (thesis Chapter 6).
     Design(design::cli::DesignArgs),
 }
@@ -331,6 +333,7 @@ fn main() {
         Cmd::Model { cmd } => strip::cli::run(cmd).map(|_| 0),
         Cmd::Replay(a) => recordings::cli::replay(a).map(|_| 0),
         Cmd::Report(a) => recordings::cli::report(a).map(|_| 0),
+        Cmd::Compare(a) => recordings::cli::compare(a).map(|_| 0),
         Cmd::Design(a) => design::cli::run(a).map(|_| 0),
     };
     match result {

@@ -23,6 +23,30 @@ pub struct ReportArgs {
     pub allow_truncated: bool,
 }
 
+/// `rig compare A.mcap B.mcap ... [--out DIR]`: runs side by side.
+#[derive(Debug, Clone, clap::Args)]
+pub struct CompareArgs {
+    /// Two or more recordings (.mcap).
+    #[arg(required = true, num_args = 2..)]
+    pub files: Vec<PathBuf>,
+    /// Folder for compare.md and the overlaid figures.
+    #[arg(long, default_value = "runs/compare")]
+    pub out: PathBuf,
+    /// Use a truncated file's complete chunks instead of refusing it.
+    #[arg(long)]
+    pub allow_truncated: bool,
+}
+
+pub fn compare(args: CompareArgs) -> anyhow::Result<()> {
+    let (text, files) = crate::compare::compare(&args.files, &args.out, args.allow_truncated)?;
+    print!("{text}");
+    println!("table       {}", files.table.display());
+    for f in &files.figures {
+        println!("figure      {}", f.display());
+    }
+    Ok(())
+}
+
 /// `rig replay FILE [--speed X] [--controller PATH]`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ReplayArgs {

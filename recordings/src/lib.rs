@@ -12,6 +12,7 @@
 
 pub mod cdr;
 pub mod cli;
+pub mod compare;
 pub mod plots;
 pub mod read;
 pub mod replay;
