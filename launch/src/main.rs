@@ -264,8 +264,8 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
     let base = sweep::load_base(&base_path)?;
     let dir = a.launch.out.unwrap_or_else(|| Path::new("runs").join(format!("sweep-{}", utc_stamp())));
     let cases = sweep::cases(&a.axes, a.grid);
-    let rt = runtime()?;
-    let mut results = Vec::with_capacity(cases.len());
+    // Every case's scenario is written and checked before the first run starts.
+    let mut planned = Vec::with_capacity(cases.len());
     for (n, case) in cases.iter().enumerate() {
         let case_dir = dir.join(format!("case-{n:02}"));
         std::fs::create_dir_all(&case_dir).with_context(|| format!("creating {}", case_dir.display()))?;
@@ -274,6 +274,12 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
         let mut doc = sweep::case_scenario(&base, &a.axes, case);
         doc.insert("description".into(), format!("rig sweep case {n}: {} with {label}", base_path.display()).into());
         std::fs::write(&path, toml::to_string(&doc)?).with_context(|| format!("writing {}", path.display()))?;
+        scenario::Scenario::load(&path)?;
+        planned.push((case_dir, path, label));
+    }
+    let rt = runtime()?;
+    let mut results = Vec::with_capacity(cases.len());
+    for (n, (case_dir, path, label)) in planned.into_iter().enumerate() {
         let mut l = prepare(supervise::unique_rig_name(), path.clone(), Some("lockstep".into()), a.launch.duration, Some(case_dir), a.launch.controller.clone())?;
         l.quiet = true;
         eprintln!("rig sweep: case {}/{}: {label}", n + 1, cases.len());

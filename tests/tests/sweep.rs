@@ -60,3 +60,16 @@ fn a_sweep_over_bump_heights_is_the_runs_it_stands_for_and_the_bump_superposes()
         assert_eq!((x.q, x.qd), (y.q, y.qd), "tick {}", x.tick);
     }
 }
+
+#[test]
+fn a_bad_case_is_refused_before_any_run_starts() {
+    let rig = unique_rig("sweepbad");
+    let dir = temp_dir(&rig);
+    let out = dir.join("sweep");
+    let mut sweep = Daemon::start("rig sweep", &bin("rig"), &["sweep", "--set", "bulge.height_mm=0.1,abc", "--out", out.to_str().unwrap()], &dir);
+    let st = sweep.expect_exit(LONG);
+    let err = sweep.stderr();
+    assert!(!st.success());
+    assert!(err.contains("case-01/scenario.toml") && err.contains("abc"), "{err}");
+    assert!(!out.join("case-00").join("run.mcap").exists(), "case 0 ran before case 1 was checked");
+}
