@@ -86,6 +86,26 @@ fn default_scenario_with_integral_action_tracks_within_the_issue_bounds() {
     assert!(c.max_rel_diff < 0.01, "recorded vs full static bottom pressure differ by {:.2} % of the peak", 100.0 * c.max_rel_diff);
 }
 
+/// Issue 6: halving the plant's integration substep changes the force-tracking numbers by less
+/// than 1 % (default scenario, 10 against 20 substeps per tick, both in lockstep).
+#[test]
+fn halving_the_substep_changes_the_tracking_numbers_by_less_than_one_percent() {
+    let path = scenario_file("default.toml");
+    let s = Scenario::load(&path).unwrap();
+    assert_eq!(s.loop_.substeps, 10);
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("\nsubsteps = 10\n"));
+    let dir = temp_dir(&unique_rig("substeps"));
+    let fine = dir.join("substeps20.toml");
+    std::fs::write(&fine, text.replace("\nsubsteps = 10\n", "\nsubsteps = 20\n")).unwrap();
+    assert_eq!(Scenario::load(&fine).unwrap().loop_.substeps, 20);
+    let (m10, r10, _) = rolling_tracking(&lockstep_servo_run("sub10", &path), &s);
+    let (m20, r20, _) = rolling_tracking(&lockstep_servo_run("sub20", &fine), &s);
+    let (dm, dr) = ((m20 - m10).abs() / m20, (r20 - r10).abs() / r20);
+    eprintln!("substeps 10 -> 20: max {m10:.5} -> {m20:.5} N ({:.3} %), RMS {r10:.5} -> {r20:.5} N ({:.3} %)", 100.0 * dm, 100.0 * dr);
+    assert!(dm < 0.01 && dr < 0.01, "max changes {:.3} %, RMS {:.3} %", 100.0 * dm, 100.0 * dr);
+}
+
 #[test]
 fn thesis_controller_without_integral_action_stays_within_the_thesis_result() {
     let path = scenario_file("thesis.toml");
