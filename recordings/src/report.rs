@@ -412,8 +412,26 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
         files.figures.extend(plots::save_lines(&plot, &out_dir.join("force_tracking"))?);
     }
 
-    // Figure 7.4: bottom pressure along the centre line at chosen instants.
+    // The bond check: the centre-line pressure under the wheel along the roll (the 100 kPa line).
     let z_nodes = rec.centreline_z_m();
+    if !roll.is_empty() && !z_nodes.is_empty() {
+        let points: Vec<(f64, f64)> = roll
+            .iter()
+            .filter_map(|&i| interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m).map(|p| (rec.strip[i].wheel_z_m * 1e3, p * 1e-3)))
+            .collect();
+        if !points.is_empty() {
+            let plot = LinePlot {
+                title: "Bond check: bottom pressure on the centre line under the wheel while rolling".into(),
+                x_label: "wheel position along the strip z [mm]".into(),
+                y_label: "pressure under the wheel [kPa]".into(),
+                series: vec![Series { label: "under the wheel".into(), points }],
+                hlines: vec![(BOND_PRESSURE_PA * 1e-3, "100 kPa bond pressure".into())],
+            };
+            files.figures.extend(plots::save_lines(&plot, &out_dir.join("bond_pressure"))?);
+        }
+    }
+
+    // Figure 7.4: bottom pressure along the centre line at chosen instants.
     let instants = if instants.is_empty() { default_instants(rec) } else { instants.to_vec() };
     if !z_nodes.is_empty() && !rec.strip.is_empty() {
         let mut series = Vec::new();

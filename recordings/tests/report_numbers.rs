@@ -86,7 +86,7 @@ fn report_writes_text_json_and_every_figure() {
     assert_eq!(json["ticks"], 2600);
     assert_eq!(json["misses"], n.misses);
     assert!(std::fs::read_to_string(&files.text).unwrap().contains("safe stops  1"));
-    for stem in ["force_tracking", "bottom_pressure", "joint_torques", "latency_histogram"] {
+    for stem in ["force_tracking", "bond_pressure", "bottom_pressure", "joint_torques", "latency_histogram"] {
         for ext in ["png", "svg"] {
             let f = out.join(format!("{stem}.{ext}"));
             assert!(files.figures.contains(&f), "{} missing from {:?}", f.display(), files.figures);
