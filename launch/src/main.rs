@@ -60,6 +60,10 @@ struct RunArgs {
     /// Loop mode, overriding the scenario's.
     #[arg(long, value_parser = ["realtime", "lockstep"])]
     mode: Option<String>,
+    /// Override one scenario field, `section.field=value` (repeatable); the scenario actually run
+    /// is written to <DIR>/scenario.toml.
+    #[arg(long = "set", value_parser = sweep::parse_axis)]
+    set: Vec<sweep::Axis>,
     #[command(flatten)]
     launch: LaunchArgs,
 }
@@ -314,8 +318,12 @@ fn main() {
     let result = match cli.cmd {
         Cmd::Run(a) => (|| {
             let rig = supervise::unique_rig_name();
-            let scenario = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
-            let l = prepare(rig, scenario, a.mode, a.launch.duration, a.launch.out, a.launch.controller)?;
+            let mut scenario = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
+            let dir = a.launch.out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
+            if !a.set.is_empty() {
+                scenario = sweep::write_overridden(&scenario, &a.set, &dir.join("scenario.toml"))?;
+            }
+            let l = prepare(rig, scenario, a.mode, a.launch.duration, Some(dir), a.launch.controller)?;
             launch_and_report(&l, false, None)
         })(),
         Cmd::Timing(a) => (|| {

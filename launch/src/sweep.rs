@@ -112,6 +112,24 @@ pub fn load_base(path: &Path) -> anyhow::Result<toml::Table> {
     Ok(text.parse().with_context(|| format!("parsing {}", path.display()))?)
 }
 
+/// `rig run --set ...`: the base scenario with each axis' single value, written to `out` and
+/// checked (errors name the written file and the field).
+pub fn write_overridden(base_path: &Path, set: &[Axis], out: &Path) -> anyhow::Result<PathBuf> {
+    for a in set {
+        anyhow::ensure!(a.values.len() == 1, "--set {}.{}: rig run takes one value (rig sweep takes several)", a.section, a.field);
+    }
+    let base = load_base(base_path)?;
+    let case: Vec<(usize, usize)> = (0..set.len()).map(|a| (a, 0)).collect();
+    let mut doc = case_scenario(&base, set, &case);
+    doc.insert("description".into(), format!("{} with {}", base_path.display(), label(set, &case)).into());
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(out, toml::to_string(&doc)?).with_context(|| format!("writing {}", out.display()))?;
+    scenario::Scenario::load(out)?;
+    Ok(out.to_path_buf())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -153,5 +171,24 @@ mod tests {
         assert_eq!(doc["trajectory"]["roll_s"].as_integer(), Some(1));
         assert_eq!(doc["loop"]["mode"].as_str(), Some("realtime"));
         assert_eq!(label(&axes, &[(0, 0), (1, 0)]), "bulge.height_mm=0.4 trajectory.roll_s=1");
+    }
+
+    #[test]
+    fn rig_run_overrides_are_written_and_checked() {
+        let base = scenario::Scenario::default_file();
+        let dir = std::env::temp_dir().join(format!("rig-run-set-{}", std::process::id()));
+        let out = dir.join("scenario.toml");
+        let set = vec![parse_axis("trajectory.force_ref_n=-12.5").unwrap(), parse_axis("controller.force_integral=false").unwrap()];
+        let p = write_overridden(&base, &set, &out).unwrap();
+        let s = scenario::Scenario::load(&p).unwrap();
+        assert_eq!((s.trajectory.force_ref_n, s.controller.force_integral), (-12.5, false));
+        // everything else is the base scenario's
+        let b = scenario::Scenario::load(&base).unwrap();
+        assert_eq!((s.bulge, s.loop_.substeps, s.trajectory.roll_s), (b.bulge, b.loop_.substeps, b.trajectory.roll_s));
+        let e = write_overridden(&base, &[parse_axis("bulge.height_mm=0.1,0.2").unwrap()], &out).unwrap_err().to_string();
+        assert!(e.contains("bulge.height_mm") && e.contains("one value"), "{e}");
+        let e = format!("{:#}", write_overridden(&base, &[parse_axis("trajectory.roll_s=-1").unwrap()], &out).unwrap_err());
+        assert!(e.contains("trajectory.roll_s") && e.contains(&out.display().to_string()), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
