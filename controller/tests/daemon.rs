@@ -26,19 +26,7 @@ fn start_q() -> [f64; 6] {
 }
 
 fn state(tick: u64, status: PlantStatus, q: [f64; 6]) -> JointState {
-    JointState {
-        contract_version: CONTRACT_VERSION,
-        plant_status: status as u32,
-        tick,
-        sim_time_s: tick as f64 * 1e-3,
-        q,
-        qd: [0.0; 6],
-        tau_applied: [0.0; 6],
-        period_s: 1e-3,
-        flags: 0,
-        consecutive_misses: 0,
-        total_misses: 0,
-    }
+    JointState::at_rest(tick, status, q)
 }
 
 fn wrench(tick: u64) -> Wrench {

@@ -140,6 +140,26 @@ pub struct JointState {
     pub total_misses: u64,
 }
 
+impl JointState {
+    /// The state of a robot at rest at `q` on tick `tick` of a 1 kHz loop: no velocity, no applied
+    /// torque, no flags, no misses (test fixtures, tools that fake a plant).
+    pub fn at_rest(tick: u64, status: PlantStatus, q: [f64; DOF]) -> JointState {
+        JointState {
+            contract_version: CONTRACT_VERSION,
+            plant_status: status as u32,
+            tick,
+            sim_time_s: tick as f64 * 1e-3,
+            q,
+            qd: [0.0; DOF],
+            tau_applied: [0.0; DOF],
+            period_s: 1e-3,
+            flags: 0,
+            consecutive_misses: 0,
+            total_misses: 0,
+        }
+    }
+}
+
 /// End-effector wrench of tick `tick`, as a 6-axis force/torque sensor reports it (plant → controller).
 ///
 /// This is the wrench the environment (strip) exerts ON the tool, F_e in (7.1) with the sign of

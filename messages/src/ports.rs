@@ -383,19 +383,7 @@ mod tests {
     }
 
     fn state(tick: u64) -> JointState {
-        JointState {
-            contract_version: CONTRACT_VERSION,
-            plant_status: 1,
-            tick,
-            sim_time_s: tick as f64 * 1e-3,
-            q: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
-            qd: [0.0; 6],
-            tau_applied: [0.0; 6],
-            period_s: 1e-3,
-            flags: 0,
-            consecutive_misses: 0,
-            total_misses: 0,
-        }
+        JointState::at_rest(tick, crate::PlantStatus::Running, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     }
 
     #[test]
