@@ -41,15 +41,22 @@ fn python_controller(t: &TestRig) -> Daemon {
     Daemon::start("python-controller", std::path::Path::new("python3"), &args, &t.dir)
 }
 
+/// A lockstep rig running `duration_s` with the Python controller on it, holding the serial
+/// lock; `None` (after a `SKIP:` line) without the Python modules.
+fn python_rig(test: &str, tag: &str, duration_s: f64) -> Option<(MutexGuard<'static, ()>, TestRig, Daemon, Daemon)> {
+    let g = serial();
+    if !python_ready(test) {
+        return None;
+    }
+    let t = TestRig::new(tag, "lockstep");
+    let plant = t.plant(duration_s);
+    let py = python_controller(&t);
+    Some((g, t, plant, py))
+}
+
 #[test]
 fn python_controller_holds_the_arm_in_lockstep_with_gravity_equal_to_the_rust_model() {
-    let _g = serial();
-    if !python_ready("python_controller_holds_the_arm") {
-        return;
-    }
-    let t = TestRig::new("py-hold", "lockstep");
-    let mut plant = t.plant(1.0);
-    let mut py = python_controller(&t);
+    let Some((_g, t, mut plant, mut py)) = python_rig("python_controller_holds_the_arm", "py-hold", 1.0) else { return };
     assert!(plant.expect_exit(Duration::from_secs(60)).success(), "plant: {}", plant.stderr());
     assert!(py.expect_exit(Duration::from_secs(10)).success(), "python controller: {}", py.stderr());
 
@@ -96,13 +103,7 @@ fn python_controller_holds_the_arm_in_lockstep_with_gravity_equal_to_the_rust_mo
 
 #[test]
 fn python_controller_exits_with_an_error_when_the_plant_dies() {
-    let _g = serial();
-    if !python_ready("python_controller_exits_when_the_plant_dies") {
-        return;
-    }
-    let t = TestRig::new("py-dead", "lockstep");
-    let mut plant = t.plant(600.0);
-    let mut py = python_controller(&t);
+    let Some((_g, _t, mut plant, mut py)) = python_rig("python_controller_exits_when_the_plant_dies", "py-dead", 600.0) else { return };
     wait_for_log(&plant, "connected", Duration::from_secs(20));
     plant.signal(libc::SIGKILL);
     plant.expect_exit(Duration::from_secs(5));
