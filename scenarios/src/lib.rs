@@ -85,6 +85,25 @@ pub struct Scenario {
     pub trajectory: TrajectoryConfig,
     pub controller: ControllerConfig,
     pub recording: RecordingConfig,
+    pub safety: SafetyConfig,
+}
+
+/// Reflex limits of the plant (DESIGN section 10): crossing one puts the plant into safe stop at
+/// once, with an `/events` entry and `state_flags::REFLEX`. The joint speed limits are the robot's
+/// own (`robot::params::VELOCITY_LIMIT_RADPS`), not a scenario value.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SafetyConfig {
+    /// TCP speed limit, m/s (ISO 10218-1's reduced speed, 0.25 m/s, by default).
+    pub max_tcp_speed_mps: f64,
+    /// Contact force limit, magnitude of the wheel–strip force, N.
+    pub max_contact_force_n: f64,
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        Self { max_tcp_speed_mps: 0.25, max_contact_force_n: 40.0 }
+    }
 }
 
 /// Loop contract (DESIGN section 6).
@@ -110,6 +129,12 @@ pub struct LoopConfig {
     pub safe_stop_damping_nms: f64,
     /// How long the torque is blended from the held value to a new controller's value, s.
     pub takeover_blend_s: f64,
+    /// Consecutive missed ticks of the active controller after which another controller that is
+    /// publishing may take over (one controller at a time, DESIGN section 10).
+    pub takeover_after_misses: u32,
+    /// How long a peer that is alive (its iceoryx2 node is not dead) but silent is waited for
+    /// before it is treated as dead, s (a stalled host or SIGSTOP is not a death).
+    pub peer_stall_timeout_s: f64,
     /// Real-time mode: the plant busy-polls for the torque this long after publishing before it
     /// sleeps on the event, µs (0 = never spin). Trades CPU for wake-up latency on VMs.
     pub spin_wait_us: f64,
@@ -136,6 +161,8 @@ impl Default for LoopConfig {
             integrator: Integrator::Midpoint,
             safe_stop_damping_nms: 20.0,
             takeover_blend_s: 0.05,
+            takeover_after_misses: 3,
+            peer_stall_timeout_s: 5.0,
             spin_wait_us: 100.0,
             controller_spin_us: 100.0,
             idle_poll: true,
@@ -501,6 +528,19 @@ impl Scenario {
         }
         if !(self.controller.strip_stiffness_n_per_m > 0.0 && self.controller.strip_stiffness_n_per_m.is_finite()) {
             return Err(bad("controller.strip_stiffness_n_per_m", self.controller.strip_stiffness_n_per_m, "must be positive and finite"));
+        }
+        if l.takeover_after_misses == 0 {
+            return Err(bad("loop.takeover_after_misses", 0.0, "must be at least 1"));
+        }
+        if !(l.peer_stall_timeout_s > 0.0 && l.peer_stall_timeout_s.is_finite()) {
+            return Err(bad("loop.peer_stall_timeout_s", l.peer_stall_timeout_s, "must be positive and finite"));
+        }
+        let sf = &self.safety;
+        if !(sf.max_tcp_speed_mps > 0.0 && sf.max_tcp_speed_mps.is_finite()) {
+            return Err(bad("safety.max_tcp_speed_mps", sf.max_tcp_speed_mps, "must be positive and finite"));
+        }
+        if !(sf.max_contact_force_n > 0.0 && sf.max_contact_force_n.is_finite()) {
+            return Err(bad("safety.max_contact_force_n", sf.max_contact_force_n, "must be positive and finite"));
         }
         if !(self.recording.queue_capacity >= 16) {
             return Err(bad("recording.queue_capacity", self.recording.queue_capacity as f64, "must be at least 16"));
