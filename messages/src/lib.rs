@@ -12,6 +12,7 @@
 
 #[cfg(feature = "logging")]
 pub mod logging;
+pub mod liveness;
 pub mod ports;
 pub mod qos;
 pub mod services;
@@ -106,6 +107,12 @@ pub mod state_flags {
     pub const LOCKSTEP: u32 = 1 << 2;
     /// The wheel is in contact with the strip.
     pub const IN_CONTACT: u32 = 1 << 3;
+    /// The safe stop is latched by a reflex (joint speed, TCP speed or contact force over its
+    /// limit): torques are not applied until an answer with `controller_status` = 1 (starting)
+    /// acknowledges it.
+    pub const REFLEX: u32 = 1 << 4;
+    /// A joint is beyond its working range, in its mechanical end stop.
+    pub const END_STOP: u32 = 1 << 5;
 }
 
 /// Joint state of tick `tick`, published by the plant at the start of the tick (plant → controller).

@@ -47,7 +47,8 @@ pub fn clean_dead_nodes() -> usize {
     cleaned
 }
 
-fn node(rig: &str, role: &str) -> Result<Node<ipc::Service>, PortError> {
+/// The iceoryx2 node of one role on one rig (`<role>/<rig>`), as every port of this crate opens it.
+pub(crate) fn node(rig: &str, role: &str) -> Result<Node<ipc::Service>, PortError> {
     // iceoryx2 warns on every start that no config file exists; keep its own log to errors unless
     // the user asks for more with IOX2_LOG_LEVEL.
     set_log_level_from_env_or(LogLevel::Error);
@@ -179,6 +180,42 @@ fn listener_fd(l: &Listener) -> i32 {
     unsafe { l.file_descriptor().native_handle() }
 }
 
+/// One controller's answer to a tick, with the iceoryx2 id of the publisher that sent it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Answer {
+    pub origin: u128,
+    pub torque: JointTorque,
+}
+
+/// The answers to one tick, at most one per publisher (fixed capacity: the service's publishers).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Answers {
+    items: [Option<Answer>; qos::MAX_PUBLISHERS],
+}
+
+impl Answers {
+    /// Keep `a`, replacing an older answer of the same publisher; beyond capacity it is dropped.
+    pub fn insert(&mut self, a: Answer) {
+        if let Some(slot) = self.items.iter_mut().find(|x| x.is_some_and(|x| x.origin == a.origin)) {
+            *slot = Some(a);
+        } else if let Some(slot) = self.items.iter_mut().find(|x| x.is_none()) {
+            *slot = Some(a);
+        }
+    }
+    pub fn clear(&mut self) {
+        self.items = [None; qos::MAX_PUBLISHERS];
+    }
+    pub fn iter(&self) -> impl Iterator<Item = &Answer> {
+        self.items.iter().flatten()
+    }
+    pub fn from_origin(&self, origin: u128) -> Option<&Answer> {
+        self.iter().find(|a| a.origin == origin)
+    }
+    pub fn is_empty(&self) -> bool {
+        self.items.iter().all(Option::is_none)
+    }
+}
+
 /// Outcome of waiting for the peer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Wake {
@@ -287,6 +324,28 @@ impl PlantPorts {
         newest_matching(&self.torque_sub, |t| t.tick == tick)
     }
 
+    /// Drain the torque subscriber into `answers`: every answer to `tick`, the newest per publisher
+    /// (iceoryx2 publisher id, [`Answer::origin`]); answers already in `answers` are kept, so
+    /// repeated calls within a tick accumulate. Older ticks are discarded. Allocation-free.
+    pub fn receive_answers(&self, tick: u64, answers: &mut Answers) {
+        while let Ok(Some(s)) = self.torque_sub.receive() {
+            if s.tick == tick {
+                answers.insert(Answer { origin: s.origin().value(), torque: *s });
+            }
+        }
+    }
+
+    /// Newest controller diagnostics of tick `tick` from publisher `origin` (0 = any publisher).
+    pub fn receive_diagnostics_from(&self, origin: u128, tick: u64) -> Option<ControllerDiagnostics> {
+        let mut last = None;
+        while let Ok(Some(s)) = self.diag_sub.receive() {
+            if s.tick == tick && (origin == 0 || s.origin().value() == origin) {
+                last = Some(*s);
+            }
+        }
+        last
+    }
+
     /// Newest torque of any tick (late answers included): for diagnostics and version checks.
     pub fn receive_torque_any(&self) -> Option<JointTorque> {
         newest(&self.torque_sub)
@@ -353,6 +412,15 @@ impl ControllerPorts {
     /// Newest joint state (older ones are stale).
     pub fn receive_state(&self) -> Option<JointState> {
         newest(&self.state_sub)
+    }
+
+    /// Newest joint state with the iceoryx2 id of the publisher that sent it (which plant).
+    pub fn receive_state_with_origin(&self) -> Option<(JointState, u128)> {
+        let mut last = None;
+        while let Ok(Some(s)) = self.state_sub.receive() {
+            last = Some((*s, s.origin().value()));
+        }
+        last
     }
 
     /// Newest wrench whose tick equals `tick`, else the newest of any tick.

@@ -83,6 +83,8 @@ pub struct GateEvents {
     pub controller_change: Option<(Option<u64>, u64)>,
     /// The controller reported a fault of its own.
     pub controller_fault: bool,
+    /// The controller acknowledged a latched reflex (`controller_status` = starting).
+    pub reflex_acknowledged: bool,
 }
 
 /// What the plant applies over this tick.
@@ -121,6 +123,10 @@ pub struct Gate {
     refusals: u64,
     controller_id: Option<u64>,
     blend: Option<Blend>,
+    /// A reflex put the plant in safe stop; only a controller's acknowledgement (an answer with
+    /// `controller_status` = starting) clears it, as libfranka's automatic error recovery does.
+    reflex_latched: bool,
+    reflexes: u64,
 }
 
 impl Gate {
@@ -135,7 +141,43 @@ impl Gate {
             refusals: 0,
             controller_id: None,
             blend: None,
+            reflex_latched: false,
+            reflexes: 0,
         }
+    }
+
+    /// A reflex tripped: safe stop at once, latched until acknowledged. Returns true if the plant
+    /// was not in safe stop before.
+    pub fn reflex(&mut self) -> bool {
+        self.reflexes += 1;
+        self.reflex_latched = true;
+        self.blend = None;
+        let entered = self.status != PlantStatus::SafeStop;
+        if entered {
+            self.safe_stops += 1;
+        }
+        self.status = PlantStatus::SafeStop;
+        entered
+    }
+
+    /// The active controller is gone (its process ended or its node is dead) and nobody took
+    /// over: safe stop now instead of after `max_consecutive_misses`. Returns true if entered.
+    pub fn controller_gone(&mut self) -> bool {
+        self.blend = None;
+        let entered = self.status != PlantStatus::SafeStop && self.status != PlantStatus::WaitingForController;
+        if entered {
+            self.safe_stops += 1;
+            self.status = PlantStatus::SafeStop;
+        }
+        entered
+    }
+
+    /// The safe stop is latched by a reflex.
+    pub fn reflex_latched(&self) -> bool {
+        self.reflex_latched
+    }
+    pub fn reflexes(&self) -> u64 {
+        self.reflexes
     }
 
     /// Status to publish with the next state (it describes the torque applied over the last tick).
@@ -189,6 +231,17 @@ impl Gate {
                 let tau = self.safe_stop_torque(gravity, qd);
                 self.last_applied = tau;
                 return Decision { tau, held: true, missed: false, refused: None, events };
+            }
+            if self.reflex_latched {
+                if t.controller_status != ControllerStatus::Starting as u32 {
+                    // Answered, but the reflex holds: not a miss, the safe stop goes on.
+                    self.consecutive_misses = 0;
+                    let tau = self.safe_stop_torque(gravity, qd);
+                    self.last_applied = tau;
+                    return Decision { tau, held: true, missed: false, refused: None, events };
+                }
+                self.reflex_latched = false;
+                events.reflex_acknowledged = true;
             }
             let new_controller = self.controller_id != Some(t.controller_id);
             if new_controller {
@@ -367,6 +420,31 @@ mod tests {
         }
         assert_eq!(d[1], 20.0, "the heavy shoulder keeps the scenario's damping");
         assert!(d[5] < 20.0, "the light wrist is capped");
+    }
+
+    #[test]
+    fn a_reflex_latches_the_safe_stop_until_the_controller_acknowledges_it() {
+        let mut gate = Gate::new(cfg());
+        let qd = Vec6::zeros();
+        for _ in 0..5 {
+            gate.decide(Some(&torque(1, 30.0)), &g(), &qd);
+        }
+        assert!(gate.reflex(), "entered the safe stop");
+        assert!(!gate.reflex(), "already in it");
+        assert_eq!(gate.safe_stops(), 1);
+        for _ in 0..10 {
+            let d = gate.decide(Some(&torque(1, 30.0)), &g(), &qd);
+            assert!(d.held && !d.missed && d.refused.is_none());
+            assert_eq!(d.tau, g(), "safe-stop torque while latched");
+        }
+        assert_eq!(gate.status(), PlantStatus::SafeStop);
+        let mut ack = torque(1, 30.0);
+        ack.controller_status = ControllerStatus::Starting as u32;
+        let d = gate.decide(Some(&ack), &g(), &qd);
+        assert!(d.events.reflex_acknowledged && d.events.safe_stop_cleared);
+        assert_eq!(d.tau[0], G + (30.0 - G) / 4.0, "blended in from the safe stop");
+        assert!(!gate.reflex_latched());
+        assert_eq!(gate.total_misses(), 0);
     }
 
     #[test]

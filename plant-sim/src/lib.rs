@@ -3,9 +3,11 @@
 //! tick over iceoryx2, applies the controller's torque through the [`gate::Gate`] (misses, safe
 //! stop, takeover blending, refusals) and records every tick.
 
+pub mod arbiter;
 pub mod contact;
 pub mod gate;
 pub mod histogram;
+pub mod limits;
 pub mod loop_rt;
 pub mod physics;
 pub mod rt;

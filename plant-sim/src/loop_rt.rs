@@ -24,7 +24,11 @@ use messages::ports::{PlantPorts, Wake};
 use messages::{state_flags, ControllerDiagnostics, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
 use scenario::Mode;
 
+use crate::arbiter::{Arbiter, ArbiterEvents, TakeoverReason};
 use crate::gate::{Decision, Gate};
+use crate::limits::ReflexLimits;
+use messages::liveness::PeerWatch;
+use messages::ports::Answers;
 use crate::histogram::Histogram;
 use crate::physics::Physics;
 use crate::recording::{EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
@@ -66,6 +70,15 @@ pub struct LoopStats {
     pub active_wall_s: f64,
     pub active_sim_s: f64,
     pub stopped_by_signal: bool,
+    pub reflexes: u64,
+    /// Answers from publishers other than the active controller, ignored.
+    pub foreign_answers: u64,
+    /// First tick of a safe stop, a reflex, a refused torque (the exit status' story).
+    pub first_safe_stop_tick: Option<u64>,
+    pub first_reflex_tick: Option<u64>,
+    pub first_refusal_tick: Option<u64>,
+    /// The launcher reported the controller process ended, or its node was seen dead.
+    pub controller_ended: bool,
 }
 
 /// A short text on the stack for rare events (no heap allocation).
@@ -103,6 +116,11 @@ pub struct PlantLoop<'a> {
     pub params: LoopParams,
     /// Tick of the last miss/refusal log line (rate limit: one per second of ticks).
     pub last_log_tick: Option<u64>,
+    /// One controller at a time.
+    pub arbiter: &'a mut Arbiter,
+    /// Liveness of the active controller's node (None: no watcher, death only by silence).
+    pub watch: Option<&'a PeerWatch>,
+    pub reflex_limits: ReflexLimits,
 }
 
 /// How long a lockstep plant republishes the waiting state while no controller has answered yet.
@@ -130,6 +148,12 @@ impl PlantLoop<'_> {
         }
         if self.physics.in_contact() {
             flags |= state_flags::IN_CONTACT;
+        }
+        if self.gate.reflex_latched() {
+            flags |= state_flags::REFLEX;
+        }
+        if self.physics.limits().joint_in_end_stop(&self.physics.q()).is_some() {
+            flags |= state_flags::END_STOP;
         }
         JointState {
             contract_version: CONTRACT_VERSION,
@@ -211,17 +235,23 @@ impl PlantLoop<'_> {
         }
     }
 
-    /// Wait for the torque answering `tick` until `deadline`. Returns it and when it was taken.
-    fn wait_for_torque(&self, tick: u64, deadline: Instant) -> Option<JointTorque> {
+    /// Collect the answers to `tick` into `answers` until the arbiter calls the tick settled (the
+    /// active controller answered, see [`Arbiter::settled`]) or `deadline` passes.
+    fn wait_for_answers(&self, tick: u64, deadline: Instant, answers: &mut Answers) {
+        let settled = |answers: &Answers| {
+            let gone = self.arbiter.active().is_some_and(|a| self.watch.is_some_and(|w| w.is_gone(a)));
+            self.arbiter.settled(answers, gone)
+        };
         // Optional busy-wait first: a halted vCPU takes tens of µs to wake on the controller's
         // notification; polling the subscriber (shared memory, no syscall) sees the torque at once.
         if self.params.spin_ns > 0 {
             let spin_end = deadline.min(Instant::now() + Duration::from_nanos(self.params.spin_ns));
             loop {
-                if let Some(t) = self.ports.receive_torque_for(tick) {
+                self.ports.receive_answers(tick, answers);
+                if settled(answers) {
                     // Consume the notification that came with it (non-blocking).
                     let _ = self.ports.wait_torque(Instant::now());
-                    return Some(t);
+                    return;
                 }
                 if Instant::now() >= spin_end {
                     break;
@@ -230,12 +260,60 @@ impl PlantLoop<'_> {
             }
         }
         loop {
-            if let Some(t) = self.ports.receive_torque_for(tick) {
-                return Some(t);
+            self.ports.receive_answers(tick, answers);
+            if settled(answers) {
+                return;
             }
             if self.ports.wait_torque(deadline) == Wake::Timeout {
-                return self.ports.receive_torque_for(tick);
+                self.ports.receive_answers(tick, answers);
+                return;
             }
+        }
+    }
+
+    /// After integrating: reflexes (safe stop at once) and end-stop entries of the new state,
+    /// which is tick `tick`'s.
+    fn check_limits(&mut self, tick: u64, t: f64, stats: &mut LoopStats, in_end_stop: &mut Option<usize>) {
+        let reflex = self.reflex_limits.check(&self.physics.qd(), self.physics.tcp_speed_mps(), self.physics.contact_force_n());
+        if let Some(r) = reflex {
+            if !self.gate.reflex_latched() {
+                self.gate.reflex();
+                stats.first_reflex_tick.get_or_insert(tick);
+                stats.first_safe_stop_tick.get_or_insert(tick);
+                let mut s = StackText::new();
+                let _ = write!(s, "tick {tick}: {r}: safe stop until the controller acknowledges");
+                tracing::error!("{}", s.as_str());
+                self.event(tick, t, EventKind::Reflex, s.as_str());
+            }
+        }
+        let stop = self.physics.limits().joint_in_end_stop(&self.physics.q());
+        if let (Some(j), None) = (stop, *in_end_stop) {
+            let [lo, hi] = self.physics.limits().range_rad[j];
+            let mut s = StackText::new();
+            let _ = write!(s, "tick {tick}: joint {} in its end stop at {:.4} rad (range {lo:.4} .. {hi:.4} rad)", j + 1, self.physics.q()[j]);
+            tracing::warn!("{}", s.as_str());
+            self.event(tick, t, EventKind::EndStop, s.as_str());
+        }
+        *in_end_stop = stop;
+    }
+
+    /// Record the arbiter's rare events.
+    fn report_arbiter(&mut self, tick: u64, t: f64, ev: &ArbiterEvents) {
+        if let Some((origin, controller_id)) = ev.ignored {
+            let mut s = StackText::new();
+            let _ = write!(s, "tick {tick}: ignoring torques of publisher {:#x} (controller_id {controller_id:#x}): another controller is active", origin as u64);
+            tracing::warn!("{}", s.as_str());
+            self.event(tick, t, EventKind::ForeignTorque, s.as_str());
+        }
+        if let Some((Some(old), new, why)) = ev.takeover {
+            let mut s = StackText::new();
+            let _ = match why {
+                TakeoverReason::Missed(n) => write!(s, "tick {tick}: publisher {:#x} takes over from {:#x}, which missed {n} ticks in a row", new as u64, old as u64),
+                TakeoverReason::Gone => write!(s, "tick {tick}: publisher {:#x} takes over from {:#x}, whose node is gone", new as u64, old as u64),
+                TakeoverReason::First => write!(s, "tick {tick}: publisher {:#x} takes over", new as u64),
+            };
+            tracing::info!("{}", s.as_str());
+            self.event(tick, t, EventKind::ControllerChange, s.as_str());
         }
     }
 
@@ -257,7 +335,16 @@ impl PlantLoop<'_> {
             active_wall_s: 0.0,
             active_sim_s: 0.0,
             stopped_by_signal: false,
+            reflexes: 0,
+            foreign_answers: 0,
+            first_safe_stop_tick: None,
+            first_reflex_tick: None,
+            first_refusal_tick: None,
+            controller_ended: false,
         };
+        let mut answers = Answers::default();
+        let mut in_end_stop: Option<usize> = None;
+        let mut gone_reported = false;
         // One reference instant for both clocks: Instant is CLOCK_MONOTONIC on Linux.
         let (origin, origin_ns) = (Instant::now(), rt::now_mono_ns());
         let at = |ns: u64| origin + Duration::from_nanos(ns.saturating_sub(origin_ns));
@@ -312,26 +399,31 @@ impl PlantLoop<'_> {
             last_publish_ns = publish_ns;
             let pre_ns = publish_ns - wake_ns;
 
-            // 3. Wait for the torque of this tick.
-            let torque = if paced {
+            // 3. Wait for the torque of this tick (the active controller's; see the arbiter).
+            answers.clear();
+            if paced {
                 // The budget counts from the publish (a plant that woke late must not blame the
                 // controller), but never past the next tick's deadline.
-                self.wait_for_torque(tick, at((publish_ns + p.budget_ns).min(deadline_ns + p.period_ns)))
+                self.wait_for_answers(tick, at((publish_ns + p.budget_ns).min(deadline_ns + p.period_ns)), &mut answers);
             } else if self.gate.status() == PlantStatus::WaitingForController {
                 // Lockstep start-up: hold tick 0 until a controller answers it.
-                let mut got = None;
                 while !rt::stop_requested() {
-                    got = self.wait_for_torque(tick, Instant::now() + LOCKSTEP_REPUBLISH);
-                    if got.is_some() {
+                    self.wait_for_answers(tick, Instant::now() + LOCKSTEP_REPUBLISH, &mut answers);
+                    if !answers.is_empty() {
                         break;
                     }
                     let _ = self.ports.publish(&state, &wrench);
                     publish_ns = rt::now_mono_ns();
                 }
-                got
             } else {
-                self.wait_for_torque(tick, at(publish_ns + p.watchdog_ns))
-            };
+                self.wait_for_answers(tick, at(publish_ns + p.watchdog_ns), &mut answers);
+            }
+            let active_gone = self.arbiter.active().is_some_and(|a| self.watch.is_some_and(|w| w.is_gone(a)));
+            let (torque, arb_events) = self.arbiter.choose(&answers, active_gone, tick);
+            if let Some(w) = self.watch {
+                w.follow(self.arbiter.active().unwrap_or(0));
+            }
+            self.report_arbiter(tick, sim_t, &arb_events);
             if rt::stop_requested() && torque.is_none() {
                 stats.stopped_by_signal = true;
                 break;
@@ -341,10 +433,40 @@ impl PlantLoop<'_> {
                 first_answer = Some((publish_ns, tick));
             }
             let recv_wall_ns = if torque.is_some() { rt::now_wall_ns() } else { 0 };
-            let diag = self.ports.receive_diagnostics().filter(|d| d.tick == tick);
+            let diag = self.ports.receive_diagnostics_from(self.watch.map_or(0, |w| w.companion()), tick);
 
             // 4. Decide and integrate.
+            // A controller that is gone (rig reports its process ended, or the watcher saw its
+            // node dead) and was not replaced: safe stop now, not after max_consecutive_misses.
+            let ended = rt::take_controller_end();
+            let still_gone = arb_events.takeover.is_none() && torque.is_none() && active_gone;
+            if ended.is_some() || (still_gone && !gone_reported) {
+                stats.controller_ended = true;
+                gone_reported = true;
+                let mut s = StackText::new();
+                let _ = match ended {
+                    Some(end) => write!(s, "tick {tick}: controller process ended ({end})"),
+                    None => write!(s, "tick {tick}: the active controller's node is dead"),
+                };
+                tracing::error!("{}", s.as_str());
+                self.event(tick, sim_t, EventKind::ControllerEnded, s.as_str());
+                if self.gate.controller_gone() {
+                    let mut s = StackText::new();
+                    let _ = write!(s, "tick {tick}: safe stop: the controller is gone (gravity compensation + joint damping)");
+                    self.event(tick, sim_t, EventKind::SafeStop, s.as_str());
+                    stats.first_safe_stop_tick.get_or_insert(tick);
+                }
+            }
+            if arb_events.takeover.is_some() {
+                gone_reported = false;
+            }
             let decision = self.gate.decide(torque.as_ref(), &self.physics.gravity_torque(), &self.physics.qd());
+            if decision.events.safe_stop_entered {
+                stats.first_safe_stop_tick.get_or_insert(tick);
+            }
+            if decision.refused.is_some() {
+                stats.first_refusal_tick.get_or_insert(tick);
+            }
             if p.mode == Mode::Lockstep {
                 // Watchdog expired: pace in real time until a controller answers again.
                 if !paced && decision.missed && torque.is_none() {
@@ -360,6 +482,7 @@ impl PlantLoop<'_> {
             }
             self.report(tick, sim_t, &decision, prev.as_ref().is_some_and(|d| d.refused.is_some()));
             self.physics.step_tick(&decision.tau);
+            self.check_limits(tick + 1, sim_t + p.period_ns as f64 * 1e-9, &mut stats, &mut in_end_stop);
 
             // 5. Record.
             let round_trip_ns = if torque.is_some() { recv_ns - publish_ns } else { 0 };
@@ -414,6 +537,8 @@ impl PlantLoop<'_> {
         stats.misses = self.gate.total_misses();
         stats.safe_stops = self.gate.safe_stops();
         stats.refusals = self.gate.refusals();
+        stats.reflexes = self.gate.reflexes();
+        stats.foreign_answers = self.arbiter.ignored_answers();
         stats.wall_s = (rt::now_mono_ns() - origin_ns) as f64 * 1e-9;
         stats.sim_s = self.physics.time_s();
         if let Some((t0, k0)) = first_answer {

@@ -73,6 +73,8 @@ pub struct Physics {
     strip_start_x_m: f64,
     /// Strip + wheel contact (`contact.rs`); None when `strip.enabled = false`.
     contact: Option<crate::contact::StripContact>,
+    /// End stops and drive torque–speed limits, applied inside every integrator stage.
+    limits: crate::limits::JointLimits,
 }
 
 impl Physics {
@@ -93,7 +95,9 @@ impl Physics {
         let q = robot
             .ik_tcp(&target, &robot::scenario_ik_seed())
             .with_context(|| format!("start pose {:?} of the scenario is not reachable", target.translation.vector))?;
+        let limits = crate::limits::JointLimits::irb2400(&robot.mass_matrix(&q).diagonal());
         Ok(Physics {
+            limits,
             robot,
             q,
             qd: Vec6::zeros(),
@@ -131,10 +135,38 @@ impl Physics {
         self.robot.gravity_torque(&self.q)
     }
 
-    /// Joint accelerations under `tau` at `(q, qd)`.
+    /// The same plant on a bare arm: no end stops, ideal drives (the integrator's own tests).
+    pub fn without_limits(mut self) -> Physics {
+        self.limits = crate::limits::JointLimits::none();
+        self
+    }
+
+    /// The cell's limits (end stops, drives).
+    pub fn limits(&self) -> &crate::limits::JointLimits {
+        &self.limits
+    }
+
+    /// Joint accelerations at `(q, qd)` under the drive torque for the command `tau.0`, the
+    /// external torque `tau.1` (contact) and the end stops, all evaluated at this stage's state.
+    /// Inside the ranges and below the drives' knee this is `forward_dynamics(q, qd, τ + τ_ext)`
+    /// exactly (the limits add exact zeros).
     #[inline]
-    fn qdd(&self, q: &Vec6, qd: &Vec6, tau: &Vec6) -> Vec6 {
-        self.robot.forward_dynamics(q, qd, tau)
+    fn qdd(&self, q: &Vec6, qd: &Vec6, tau: &(Vec6, Vec6)) -> Vec6 {
+        let total = self.limits.drive_torque(&tau.0, qd) + tau.1 + self.limits.end_stop_torque(q, qd);
+        self.robot.forward_dynamics(q, qd, &total)
+    }
+
+    /// TCP speed |J q̇| (translation), m/s, at the current state (the reflex's input).
+    pub fn tcp_speed_mps(&self) -> f64 {
+        let frames = self.robot.frames(&self.q);
+        let p = self.robot.tcp_position(&frames);
+        let v = self.robot.jacobian_point(&frames, &p) * self.qd;
+        (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+    }
+
+    /// Magnitude of the wheel–strip contact force, N (0 without a strip).
+    pub fn contact_force_n(&self) -> f64 {
+        self.contact.as_ref().map_or(0.0, |c| c.contact_force_n())
     }
 
     /// Advance one tick with the joint torque `tau` (N m) held constant: `substeps` steps of the
@@ -155,7 +187,7 @@ impl Physics {
                 }
                 None => Vec6::zeros(),
             };
-            let tau = &(tau_cmd + tau_ext);
+            let tau = &(*tau_cmd, tau_ext);
             (self.q, self.qd) = match self.integrator {
                 Integrator::Midpoint => self.midpoint(&q, &qd, tau, h),
                 Integrator::Rk4 => self.rk4(&q, &qd, tau, h),
@@ -166,7 +198,7 @@ impl Physics {
 
     /// One explicit-midpoint step of length h (second order).
     #[inline]
-    fn midpoint(&self, q: &Vec6, qd: &Vec6, tau: &Vec6, h: f64) -> (Vec6, Vec6) {
+    fn midpoint(&self, q: &Vec6, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
         let k1a = self.qdd(q, qd, tau);
         let qm = q + qd * (0.5 * h);
         let vm = qd + k1a * (0.5 * h);
@@ -176,7 +208,7 @@ impl Physics {
 
     /// One classic RK4 step of length h (fourth order).
     #[inline]
-    fn rk4(&self, q: &Vec6, qd: &Vec6, tau: &Vec6, h: f64) -> (Vec6, Vec6) {
+    fn rk4(&self, q: &Vec6, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
         let k1v = qd;
         let k1a = self.qdd(q, qd, tau);
         let q2 = q + k1v * (0.5 * h);
@@ -260,12 +292,13 @@ mod tests {
         assert!((p.time_s() - 0.1).abs() < 1e-12);
     }
 
-    /// Free fall (no torque, no friction) for `ticks` ms with `substeps` of `integrator`.
+    /// Free fall (no torque, no friction) for `ticks` ms with `substeps` of `integrator`, on the
+    /// bare arm (the end stops would take energy out of the swing).
     fn free_fall(integrator: Integrator, substeps: u32, ticks: usize, mut each_tick: impl FnMut(&Physics)) -> Physics {
         let mut s = scenario();
         s.loop_.substeps = substeps;
         s.loop_.integrator = integrator;
-        let mut p = Physics::new(&s, Path::new("/nonexistent")).unwrap();
+        let mut p = Physics::new(&s, Path::new("/nonexistent")).unwrap().without_limits();
         for _ in 0..ticks {
             p.step_tick(&Vec6::zeros());
             each_tick(&p);
@@ -318,6 +351,33 @@ mod tests {
                 let expect = (1u32 << order) as f64;
                 assert!(ratio > 0.625 * expect && ratio < 1.5 * expect, "{integrator:?}: energy error ratio {ratio}, order {order} gives {expect}");
             }
+        }
+    }
+
+    /// Each joint in turn, driven with half its torque limit on top of gravity compensation (the
+    /// drive holds it at about its axis speed), runs into its end stop, which holds it within
+    /// 2 degrees past the range (the stop is sized for 0.25 degree at the torque limit).
+    #[test]
+    fn end_stops_hold_a_joint_driven_into_them() {
+        let s = scenario();
+        for j in 0..6 {
+            let mut p = Physics::new(&s, Path::new("/nonexistent")).unwrap();
+            // The other joints held by gravity compensation and the safe stop's (capped) damping.
+            let d = Vec6::from(crate::gate::safe_stop_damping(20.0, &p.robot().mass_matrix(&p.q()).diagonal(), 1e-3));
+            let (mut worst, mut top_speed) = (0.0f64, 0.0f64);
+            let [lo, hi] = p.limits().range_rad[j];
+            for _ in 0..3000 {
+                let mut tau = p.gravity_torque() - p.qd().component_mul(&d);
+                tau[j] = p.gravity_torque()[j] + 0.5 * p.limits().torque_nm[j];
+                p.step_tick(&tau);
+                worst = worst.max(p.q()[j] - hi).max(lo - p.q()[j]);
+                if worst <= 0.0 {
+                    top_speed = top_speed.max(p.qd()[j].abs());
+                }
+            }
+            eprintln!("joint {}: {:.3} deg past its range, top speed before the stop {:.3} of the axis speed", j + 1, worst.to_degrees(), top_speed / p.limits().speed_radps[j]);
+            assert!(worst > 0.0, "joint {} never reached its stop", j + 1);
+            assert!(worst < 2f64.to_radians(), "joint {}: {} deg past its range", j + 1, worst.to_degrees());
         }
     }
 

@@ -145,6 +145,68 @@ pub fn install_stop_signals() {
     }
 }
 
+/// Value of the last SIGUSR1 (sigqueue) from the launcher: the controller process ended.
+/// Encoded as `1 + exit status` or `-(signal)`, 0 = no report. See [`controller_ended`].
+static CONTROLLER_ENDED: std::sync::atomic::AtomicI32 = std::sync::atomic::AtomicI32::new(0);
+
+extern "C" fn on_controller_ended(_sig: libc::c_int, info: *mut libc::siginfo_t, _ctx: *mut libc::c_void) {
+    // SAFETY: the kernel passes a valid siginfo_t to an SA_SIGINFO handler; reading it and storing
+    // to an atomic is async-signal-safe.
+    let v = unsafe { (*info).si_value().sival_ptr as usize as i32 };
+    CONTROLLER_ENDED.store(if v == 0 { i32::MIN } else { v }, Ordering::Relaxed);
+}
+
+/// Install the SIGUSR1 handler through which `rig` tells the plant that the controller process
+/// ended (it sends `sigqueue(plant, SIGUSR1, code)` with [`encode_controller_end`]'s code).
+pub fn install_controller_end_signal() {
+    // SAFETY: as in install_stop_signals; the handler only reads siginfo and stores an atomic.
+    unsafe {
+        let mut sa: libc::sigaction = std::mem::zeroed();
+        sa.sa_sigaction = on_controller_ended as extern "C" fn(libc::c_int, *mut libc::siginfo_t, *mut libc::c_void) as usize;
+        libc::sigemptyset(&mut sa.sa_mask);
+        sa.sa_flags = libc::SA_SIGINFO;
+        libc::sigaction(libc::SIGUSR1, &sa, std::ptr::null_mut());
+    }
+}
+
+/// How a controller process ended, as `rig` reports it to the plant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ControllerEnd {
+    Exit(i32),
+    Signal(i32),
+    Unknown,
+}
+
+impl std::fmt::Display for ControllerEnd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ControllerEnd::Exit(c) => write!(f, "exit status {c}"),
+            ControllerEnd::Signal(s) => write!(f, "killed by signal {s}"),
+            ControllerEnd::Unknown => f.write_str("unknown status"),
+        }
+    }
+}
+
+/// The sigqueue value for `end` (never 0).
+pub fn encode_controller_end(end: ControllerEnd) -> i32 {
+    match end {
+        ControllerEnd::Exit(c) => 1 + c.clamp(0, 255),
+        ControllerEnd::Signal(s) => -s.clamp(1, 64),
+        ControllerEnd::Unknown => i32::MIN,
+    }
+}
+
+/// Taken once: the controller-end report `rig` sent, if any.
+pub fn take_controller_end() -> Option<ControllerEnd> {
+    let v = CONTROLLER_ENDED.swap(0, Ordering::Relaxed);
+    match v {
+        0 => None,
+        i32::MIN => Some(ControllerEnd::Unknown),
+        v if v > 0 => Some(ControllerEnd::Exit(v - 1)),
+        v => Some(ControllerEnd::Signal(-v)),
+    }
+}
+
 /// True once SIGINT or SIGTERM arrived.
 #[inline]
 pub fn stop_requested() -> bool {

@@ -66,6 +66,12 @@ impl RunSummary {
             "misses": s.misses,
             "safe_stops": s.safe_stops,
             "refusals": s.refusals,
+            "reflexes": s.reflexes,
+            "foreign_answers": s.foreign_answers,
+            "first_safe_stop_tick": s.first_safe_stop_tick,
+            "first_reflex_tick": s.first_reflex_tick,
+            "first_refusal_tick": s.first_refusal_tick,
+            "controller_ended": s.controller_ended,
             "overruns": s.overruns,
             "rt_p50_us": us(s.round_trip.quantile_ns(0.5)),
             "rt_p99_us": us(s.round_trip.quantile_ns(0.99)),
@@ -114,6 +120,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         tracing::info!("removed the shared-memory leftovers of {cleaned} dead iceoryx2 node(s)");
     }
     rt::install_stop_signals();
+    rt::install_controller_end_signal();
 
     let mut physics = Physics::new(&scenario, &opts.cache_dir)?;
     let mut gate = Gate::new(GateConfig {
@@ -127,6 +134,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         torque_limit_nm: robot::Robot::TORQUE_LIMIT_NM,
     });
     let ports = messages::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
+    // Liveness of the controllers' nodes, on its own thread (started before the loop's real-time
+    // set-up, so it keeps the normal scheduling policy).
+    let watch = messages::liveness::PeerWatch::spawn(&opts.rig, "plant-sim-watch", messages::liveness::Watched::Controllers)?;
+    let mut arbiter = crate::arbiter::Arbiter::new(l.takeover_after_misses);
 
     // Lockstep: the recorder's writer thread inherits this thread's affinity when it is spawned;
     // keep it off the CPU the loop and the controller are pinned to (ZSTD compression costs
@@ -210,7 +221,18 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         r.record_event(&EventRecord::new(0, 0.0, EventKind::Start, &text));
     }
 
-    let stats = PlantLoop { ports: &ports, physics: &mut physics, gate: &mut gate, recorder: recorder.as_mut(), params, last_log_tick: None }.run();
+    let stats = PlantLoop {
+        ports: &ports,
+        physics: &mut physics,
+        gate: &mut gate,
+        recorder: recorder.as_mut(),
+        params,
+        last_log_tick: None,
+        arbiter: &mut arbiter,
+        watch: Some(&watch),
+        reflex_limits: crate::limits::ReflexLimits::from_scenario(&scenario),
+    }
+    .run();
     let drops = recorder.as_ref().map_or(0, |r| r.dropped());
     if let Some(r) = recorder {
         r.finish().context("finishing the recording")?;

@@ -106,10 +106,18 @@ pub enum EventKind {
     RecordingError = 9,
     Fault = 10,
     Info = 11,
+    /// A reflex (joint speed, TCP speed, contact force over its limit) put the plant in safe stop.
+    Reflex = 12,
+    /// A joint entered its mechanical end stop.
+    EndStop = 13,
+    /// Torques from a publisher that is not the active controller were ignored (once per publisher).
+    ForeignTorque = 14,
+    /// The controller process ended (reported by the launcher) or its node was found dead.
+    ControllerEnded = 15,
 }
 
 impl EventKind {
-    pub const ALL: [EventKind; 12] = [
+    pub const ALL: [EventKind; 16] = [
         Self::Start,
         Self::Stop,
         Self::ModeChange,
@@ -122,6 +130,10 @@ impl EventKind {
         Self::RecordingError,
         Self::Fault,
         Self::Info,
+        Self::Reflex,
+        Self::EndStop,
+        Self::ForeignTorque,
+        Self::ControllerEnded,
     ];
 
     pub fn from_u8(v: u8) -> Option<Self> {
@@ -143,6 +155,10 @@ impl EventKind {
             Self::RecordingError => "recording_error",
             Self::Fault => "fault",
             Self::Info => "info",
+            Self::Reflex => "reflex",
+            Self::EndStop => "end_stop",
+            Self::ForeignTorque => "foreign_torque",
+            Self::ControllerEnded => "controller_ended",
         }
     }
 }

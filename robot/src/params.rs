@@ -79,7 +79,8 @@ pub const GRAVITY_MPS2: f64 = 9.81;
 
 /// Joint position limits in this DH convention (rad), `[lower, upper]` per joint.
 ///
-/// From the IRB 2400/16 product specification (axis 1 +-180 deg, axis 2 +110/-100 deg,
+/// From ABB's product specification of the IRB 2400 (3HAC 8857-1, "Working range" and "Axis
+/// speeds"; IRB 2400/10 and /16) (axis 1 +-180 deg, axis 2 +110/-100 deg,
 /// axis 3 +65/-60 deg, axis 4 +-200 deg, axis 5 +-120 deg, axis 6 +-400 deg), shifted to this
 /// convention: DH `q2 = ABB axis 2 - pi/2`; the other axes share ABB's zero and sign.
 pub const POSITION_LIMIT_RAD: [[f64; 2]; 6] = [
@@ -95,6 +96,21 @@ pub const POSITION_LIMIT_RAD: [[f64; 2]; 6] = [
 /// 450 deg/s.
 pub const VELOCITY_LIMIT_RADPS: [f64; 6] =
     [150.0 * DEG, 150.0 * DEG, 150.0 * DEG, 360.0 * DEG, 360.0 * DEG, 450.0 * DEG];
+
+/// Mechanical end stops (DESIGN section 10): beyond a range limit the stop acts as a stiff spring
+/// `τ = −k δ` on the penetration δ, stiff enough that the joint's own torque limit presses it in by
+/// only `END_STOP_PENETRATION_AT_TORQUE_LIMIT_RAD` (0.25 degree): `k_i = TORQUE_LIMIT_NM[i] / 0.25 deg`,
+/// so that a joint arriving at its axis speed stops within 2 degrees past its range.
+/// The plant adds critical damping for the joint's inertia (see `plant_sim::limits`).
+pub const END_STOP_PENETRATION_AT_TORQUE_LIMIT_RAD: f64 = 0.25 * DEG;
+
+/// Drive torque–speed limit: a drive delivers its full torque up to the knee
+/// `DRIVE_KNEE_SPEED_RATIO × VELOCITY_LIMIT_RADPS` and, while it drives the joint faster still
+/// (motoring), linearly less, down to zero at `DRIVE_ZERO_TORQUE_SPEED_RATIO ×` the axis speed. Braking
+/// torque is never limited. ABB publishes no drive curves; the knee at the axis speed and the
+/// zero 10 % above it make the axis speed the practical maximum, as on the real arm.
+pub const DRIVE_KNEE_SPEED_RATIO: f64 = 1.0;
+pub const DRIVE_ZERO_TORQUE_SPEED_RATIO: f64 = 1.1;
 
 /// Joint torque limits (N m). ABB does not publish them and the thesis gives none; these are
 /// assumed values, a few times the static gravity load of each axis at full reach (axes 1-3)

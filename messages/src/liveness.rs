@@ -1,0 +1,243 @@
+//! Is a peer dead? iceoryx2 raises no error when the process behind a publisher dies; its node's
+//! liveness (the node monitor) says so. [`PeerWatch`] asks on its own thread every
+//! [`WATCH_PERIOD`] (the node list is a directory scan, no place for the 1 kHz path) and answers
+//! the loop through atomics: the loop stores the publisher it follows ([`PeerWatch::follow`]) and
+//! reads whether that publisher's node is gone ([`PeerWatch::is_gone`]), both lock-free.
+//!
+//! A publisher is *gone* when its node is dead (SIGKILL, crash) or no longer exists, or when the
+//! publisher left the service (the peer dropped it). A stalled but living peer (SIGSTOP, a host
+//! stall) is not gone: silence alone never means death (DESIGN section 10).
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use iceoryx2::prelude::*;
+
+use crate::ports::PortError;
+use crate::{qos, services};
+
+/// How often the node list is read: a dead peer is seen within this plus the scan, well inside
+/// the 100 ms the contract promises.
+pub const WATCH_PERIOD: Duration = Duration::from_millis(10);
+
+/// A 128-bit id in two atomics, with a sequence word so a reader never sees a torn pair.
+#[derive(Default)]
+struct AtomicId {
+    seq: AtomicU64,
+    hi: AtomicU64,
+    lo: AtomicU64,
+}
+
+impl AtomicId {
+    /// Single writer.
+    fn store(&self, v: u128) {
+        let s = self.seq.load(Ordering::Relaxed);
+        self.seq.store(s.wrapping_add(1), Ordering::Release);
+        self.hi.store((v >> 64) as u64, Ordering::Release);
+        self.lo.store(v as u64, Ordering::Release);
+        self.seq.store(s.wrapping_add(2), Ordering::Release);
+    }
+    fn load(&self) -> u128 {
+        loop {
+            let s0 = self.seq.load(Ordering::Acquire);
+            let hi = self.hi.load(Ordering::Acquire);
+            let lo = self.lo.load(Ordering::Acquire);
+            if s0 % 2 == 0 && self.seq.load(Ordering::Acquire) == s0 {
+                return (u128::from(hi) << 64) | u128::from(lo);
+            }
+            std::hint::spin_loop();
+        }
+    }
+}
+
+#[derive(Default)]
+struct Shared {
+    /// Publisher the loop follows (0 = none).
+    followed: AtomicId,
+    /// The followed publisher found gone by the watcher (0 = none).
+    gone: AtomicId,
+    /// Another publisher of the same node as the followed one, on the companion service (the
+    /// controller's diagnostics publisher next to its torque publisher), 0 = unknown.
+    companion: AtomicId,
+    stop: AtomicBool,
+}
+
+/// Watches the node behind one publisher of a rig service. Dropping it stops the thread.
+pub struct PeerWatch {
+    shared: Arc<Shared>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// Which service's publishers are watched.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Watched {
+    /// The plant, through its `joint_state` publisher (a controller watches this).
+    Plant,
+    /// Controllers, through their `joint_torque` publishers, with their `controller_diagnostics`
+    /// publishers as companions (the plant watches this).
+    Controllers,
+}
+
+impl PeerWatch {
+    /// Start the watcher thread for rig `rig`. It opens its own iceoryx2 node (`role` names it),
+    /// since iceoryx2's IPC ports belong to the thread that made them.
+    pub fn spawn(rig: &str, role: &str, watched: Watched) -> Result<PeerWatch, PortError> {
+        let shared = Arc::new(Shared::default());
+        let (tx, rx) = std::sync::mpsc::channel::<Result<(), PortError>>();
+        let (rig_s, role_s, sh) = (rig.to_string(), role.to_string(), shared.clone());
+        let thread = std::thread::Builder::new()
+            .name("peer-watch".into())
+            .spawn(move || watch_thread(&rig_s, &role_s, watched, &sh, &tx))
+            .map_err(|e| PortError(format!("rig {rig:?}: start the peer watcher: {e}")))?;
+        match rx.recv() {
+            Ok(Ok(())) => Ok(PeerWatch { shared, thread: Some(thread) }),
+            Ok(Err(e)) => Err(e),
+            Err(_) => Err(PortError(format!("rig {rig:?}: the peer watcher ended at start-up"))),
+        }
+    }
+
+    /// Follow publisher `id` (a sample's origin); 0 follows none. Lock-free.
+    pub fn follow(&self, id: u128) {
+        if self.shared.followed.load() != id {
+            self.shared.followed.store(id);
+        }
+    }
+
+    /// True once the watcher saw the node of publisher `id` dead or gone. Lock-free.
+    pub fn is_gone(&self, id: u128) -> bool {
+        id != 0 && self.shared.gone.load() == id
+    }
+
+    /// The followed peer's publisher on the companion service, 0 while unknown. Lock-free.
+    pub fn companion(&self) -> u128 {
+        self.shared.companion.load()
+    }
+}
+
+impl Drop for PeerWatch {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+type Factory<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
+
+fn open<T: core::fmt::Debug + ZeroCopySend + Copy>(node: &Node<ipc::Service>, rig: &str, svc: &str) -> Result<Factory<T>, PortError> {
+    let name = services::service_name(rig, svc);
+    let name: ServiceName = name.as_str().try_into().map_err(|e| PortError(format!("rig {rig:?}: {svc}: {e:?}")))?;
+    node.service_builder(&name)
+        .publish_subscribe::<T>()
+        .max_publishers(qos::MAX_PUBLISHERS)
+        .max_subscribers(qos::MAX_SUBSCRIBERS)
+        .max_nodes(qos::MAX_NODES)
+        .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
+        .subscriber_max_borrowed_samples(qos::MAX_BORROWED_SAMPLES)
+        .history_size(qos::HISTORY)
+        .enable_safe_overflow(qos::SAFE_OVERFLOW)
+        .open_or_create()
+        .map_err(|e| PortError(format!("rig {rig:?}: peer watcher: open service {svc}: {e:?}")))
+}
+
+/// The node of publisher `id` on a service, if it is registered there.
+fn node_of<T: core::fmt::Debug + ZeroCopySend + Copy>(f: &Factory<T>, id: u128) -> Option<u128> {
+    let mut node = None;
+    f.dynamic_config().list_publishers(|d| {
+        if d.publisher_id.value() == id {
+            node = Some(d.node_id.value());
+            return CallbackProgression::Stop;
+        }
+        CallbackProgression::Continue
+    });
+    node
+}
+
+/// A publisher of node `node` on a service, if any.
+fn publisher_of_node<T: core::fmt::Debug + ZeroCopySend + Copy>(f: &Factory<T>, node: u128) -> Option<u128> {
+    let mut id = None;
+    f.dynamic_config().list_publishers(|d| {
+        if d.node_id.value() == node {
+            id = Some(d.publisher_id.value());
+            return CallbackProgression::Stop;
+        }
+        CallbackProgression::Continue
+    });
+    id
+}
+
+/// Is node `node` alive? Dead, vanished or undefined nodes are not.
+fn node_alive(config: &Config, node: u128) -> bool {
+    let mut alive = false;
+    let _ = Node::<ipc::Service>::list(config, |state| {
+        if state.node_id().value() == node {
+            alive = matches!(state, NodeState::Alive(_) | NodeState::Inaccessible(_));
+            return CallbackProgression::Stop;
+        }
+        CallbackProgression::Continue
+    });
+    alive
+}
+
+fn watch_thread(rig: &str, role: &str, watched: Watched, sh: &Shared, ready: &std::sync::mpsc::Sender<Result<(), PortError>>) {
+    let setup = (|| -> Result<_, PortError> {
+        let node = crate::ports::node(rig, role)?;
+        let (main, companion) = match watched {
+            Watched::Plant => (Either::State(open::<crate::JointState>(&node, rig, services::JOINT_STATE)?), None),
+            Watched::Controllers => (
+                Either::Torque(open::<crate::JointTorque>(&node, rig, services::JOINT_TORQUE)?),
+                Some(open::<crate::ControllerDiagnostics>(&node, rig, services::CONTROLLER_DIAGNOSTICS)?),
+            ),
+        };
+        Ok((node, main, companion))
+    })();
+    let (node, main, companion) = match setup {
+        Ok(x) => {
+            let _ = ready.send(Ok(()));
+            x
+        }
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return;
+        }
+    };
+    let mut known: (u128, u128) = (0, 0); // (followed publisher, its node)
+    while !sh.stop.load(Ordering::Acquire) {
+        std::thread::sleep(WATCH_PERIOD);
+        let followed = sh.followed.load();
+        if followed == 0 || sh.gone.load() == followed {
+            continue;
+        }
+        let node_id = match &main {
+            Either::State(f) => node_of(f, followed),
+            Either::Torque(f) => node_of(f, followed),
+        };
+        let gone = match node_id {
+            Some(n) => {
+                if known != (followed, n) {
+                    // Found once the companion publisher exists (a controller may open it later).
+                    match companion.as_ref().map(|c| publisher_of_node(c, n)) {
+                        Some(Some(c)) => {
+                            sh.companion.store(c);
+                            known = (followed, n);
+                        }
+                        Some(None) => sh.companion.store(0),
+                        None => known = (followed, n),
+                    }
+                }
+                !node_alive(node.config(), n)
+            }
+            None => true,
+        };
+        if gone {
+            sh.gone.store(followed);
+        }
+    }
+}
+
+enum Either {
+    State(Factory<crate::JointState>),
+    Torque(Factory<crate::JointTorque>),
+}
