@@ -164,6 +164,7 @@ impl JointState {
 ///
 /// This is the wrench the environment (strip) exerts ON the tool, F_e in (7.1) with the sign of
 /// the thesis: pressing the strip down gives a force along +y_task (= +z_base) on the tool.
+/// See messages/README.md, Frames and signs.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("rig::Wrench")]
 #[repr(C)]
