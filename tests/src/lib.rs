@@ -229,7 +229,7 @@ pub fn python_has(test: &str, modules: &str, pip: &str) -> bool {
 /// A lockstep rig running `duration_s` with the Python controller `script` (an executable file
 /// with a shebang, started as `script --rig NAME --scenario FILE` like `rig run` starts any
 /// controller), holding the Python serial lock; `None` (after a `SKIP:` line) when python3 lacks
-/// `modules`.
+/// `modules`. `loop_extra`: more `[loop]` lines for the scenario (e.g. `"peer_stall_timeout_s = 0.3\n"`).
 pub fn python_rig(
     test: &str,
     tag: &str,
@@ -237,12 +237,16 @@ pub fn python_rig(
     script: &Path,
     modules: &str,
     pip: &str,
+    loop_extra: &str,
 ) -> Option<(MutexGuard<'static, ()>, TestRig, Daemon, Daemon)> {
     let g = PYTHON_SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     if !python_has(test, modules, pip) {
         return None;
     }
-    let t = TestRig::new(tag, "lockstep");
+    let mut t = TestRig::new(tag, "lockstep");
+    if !loop_extra.is_empty() {
+        t.scenario = write_scenario(&t.dir, "lockstep", loop_extra);
+    }
     let plant = t.plant(duration_s);
     let args = ["--rig", t.rig.as_str(), "--scenario", t.scenario.to_str().unwrap()];
     let py = Daemon::start("python-controller", script, &args, &t.dir);

@@ -18,8 +18,8 @@ fn script() -> PathBuf {
 
 /// A lockstep rig running `duration_s` with the minimal controller on it, started as `rig run`
 /// starts a controller (the file itself, by its shebang); `None` without iceoryx2 for Python.
-fn minimal_rig(test: &str, tag: &str, duration_s: f64) -> Option<(MutexGuard<'static, ()>, TestRig, Daemon, Daemon)> {
-    python_rig(test, tag, duration_s, &script(), "iceoryx2", "iceoryx2==0.10.0")
+fn minimal_rig(test: &str, tag: &str, duration_s: f64, loop_extra: &str) -> Option<(MutexGuard<'static, ()>, TestRig, Daemon, Daemon)> {
+    python_rig(test, tag, duration_s, &script(), "iceoryx2", "iceoryx2==0.10.0", loop_extra)
 }
 
 /// The README shows the script as its Python code block: the two must be the same text.
@@ -39,7 +39,7 @@ fn the_readme_shows_the_minimal_controller_as_it_is() {
 
 #[test]
 fn minimal_controller_answers_every_tick_and_holds_the_arm_then_exits_0_on_the_goodbye() {
-    let Some((_g, t, mut plant, mut py)) = minimal_rig("minimal_controller_holds_the_arm", "min-hold", 1.0) else { return };
+    let Some((_g, t, mut plant, mut py)) = minimal_rig("minimal_controller_holds_the_arm", "min-hold", 1.0, "") else { return };
     assert!(plant.expect_exit(Duration::from_secs(60)).success(), "plant: {}", plant.stderr());
     let st = py.expect_exit(Duration::from_secs(10));
     assert!(st.success(), "the minimal controller exits 0 on the plant's goodbye ({st}): {}", py.stderr());
@@ -104,7 +104,7 @@ fn minimal_controller_answers_every_tick_and_holds_the_arm_then_exits_0_on_the_g
 
 #[test]
 fn minimal_controller_exits_non_zero_soon_after_the_plant_is_killed() {
-    let Some((_g, _t, mut plant, mut py)) = minimal_rig("minimal_controller_exits_when_the_plant_dies", "min-dead", 600.0) else { return };
+    let Some((_g, _t, mut plant, mut py)) = minimal_rig("minimal_controller_exits_when_the_plant_dies", "min-dead", 600.0, "") else { return };
     wait_for_log(&plant, "connected", Duration::from_secs(20));
     std::thread::sleep(Duration::from_millis(200)); // well into the run
     let killed = Instant::now();
@@ -127,4 +127,30 @@ fn minimal_controller_exits_non_zero_soon_after_the_plant_is_killed() {
     assert!(waited_ms < 100.0, "noticed the dead plant after {waited_ms} ms without a state");
     assert!(after < Duration::from_millis(500), "exited {after:?} after the plant's SIGKILL");
     println!("minimal controller: exited {after:?} after the plant's SIGKILL: {}", err.trim());
+}
+
+#[test]
+fn minimal_controller_waits_for_a_stopped_plant_up_to_the_stall_timeout() {
+    let stall_s = 0.3;
+    let extra = format!("peer_stall_timeout_s = {stall_s}\n");
+    let Some((_g, _t, plant, mut py)) = minimal_rig("minimal_controller_waits_for_a_stopped_plant", "min-stall", 600.0, &extra) else { return };
+    wait_for_log(&plant, "connected", Duration::from_secs(20));
+    std::thread::sleep(Duration::from_millis(100));
+    // A plant stopped for less than the stall timeout is alive: the controller keeps going.
+    plant.signal(libc::SIGSTOP);
+    std::thread::sleep(Duration::from_millis(150));
+    plant.signal(libc::SIGCONT);
+    std::thread::sleep(Duration::from_millis(200));
+    assert!(py.wait_timeout(Duration::ZERO).is_none(), "a 150 ms stall ended the controller: {}", py.stderr());
+    // Stopped for longer: the controller gives up after the scenario's loop.peer_stall_timeout_s.
+    let stopped = Instant::now();
+    plant.signal(libc::SIGSTOP);
+    let st = py.expect_exit(Duration::from_secs(5));
+    let after = stopped.elapsed();
+    plant.signal(libc::SIGCONT);
+    assert!(!st.success(), "a silent plant ends the controller with an error ({st})");
+    let err = py.stderr();
+    assert!(err.contains("alive but silent for 0.3 s") && err.lines().count() == 1, "one sentence: {err}");
+    assert!(after >= Duration::from_secs_f64(stall_s - 0.01) && after < Duration::from_secs_f64(stall_s + 0.5), "exited {after:?} after the SIGSTOP");
+    println!("minimal controller: exited {after:?} after the plant's SIGSTOP (stall timeout {stall_s} s): {}", err.trim());
 }

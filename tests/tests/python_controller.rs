@@ -19,7 +19,7 @@ fn script() -> PathBuf {
 /// A lockstep rig running `duration_s` with the Python hold controller on it (see
 /// [`rig_tests::python_rig`]); `None` without the Python modules.
 fn python_rig(test: &str, tag: &str, duration_s: f64) -> Option<(MutexGuard<'static, ()>, TestRig, Daemon, Daemon)> {
-    rig_tests::python_rig(test, tag, duration_s, &script(), "iceoryx2, pinocchio, numpy", "iceoryx2==0.10.0 pin numpy")
+    rig_tests::python_rig(test, tag, duration_s, &script(), "iceoryx2, pinocchio, numpy", "iceoryx2==0.10.0 pin numpy", "")
 }
 
 #[test]
