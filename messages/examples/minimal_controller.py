@@ -92,7 +92,7 @@ def main():
     node, state_sub, wrench_sub, torque_pub, state_ready, torque_ready = open_ports(a.rig)
     cid = (os.getpid() << 32) | (time.time_ns() & 0xFFFFFFFF)  # unique to this process
     q0 = u = sent = last_tick = last_seen = None
-    plant_known, started = False, time.monotonic()
+    plant_known, started = False, time.monotonic()  # plant_known: its node was seen (else: stall timeout only)
     fail = lambda why: sys.exit(f"minimal_controller.py: error: rig {a.rig!r}: {why}")
     while True:
         state_ready.timed_wait(WAKE)  # sleep until the plant notifies (or the timeout)
