@@ -7,6 +7,7 @@
 //! evaluated as one RNEA call `rnea(q, q̇, a_q)` (which also carries the model's armature and
 //! viscous friction). J is the TCP Jacobian in base axes (rows v, ω); F_e is the wrench the robot
 //! exerts on the strip at the TCP, i.e. minus the measured wrench on the tool.
+//! See messages/README.md, Frames and signs.
 //!
 //! Task y (strip normal), in contact: a_y = (F_r − F_e + u_I − b_d ẏ)/m_d (6.3) with F_e the force
 //! on the strip along task y (negative = pressing) and u_I = k_i ∫(F_r − F_e) dt clamped to
