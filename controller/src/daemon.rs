@@ -277,13 +277,12 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         let status = PlantStatus::from_u32(state.plant_status);
         let stopped = status == Some(PlantStatus::SafeStop);
         let running = matches!(status, Some(PlantStatus::Running | PlantStatus::WaitingForController));
-        if !running && !first {
-            reference.hold(state.period_s);
-        }
         if stopped && !was_stopped && !first {
             let kin = law.kinematics(&q, &qd);
             let w = wrench_on_tool_base(&wrench, &kin.rot_base_tool);
-            reference.reengage(state.sim_time_s, &kin.pos_task_m, law.strip_force_y(&Vector3::new(w[0], w[1], w[2])));
+            reference.reengage(state.sim_time_s, &kin.pos_task_m, &kin.vel_task_mps, law.strip_force_y(&Vector3::new(w[0], w[1], w[2])));
+        } else if !running && !first {
+            reference.hold(state.period_s);
         }
         was_stopped = stopped;
         law.set_integrating(running && state.flags & state_flags::IN_CONTACT != 0);

@@ -218,13 +218,31 @@ pub fn touchdown_profile(tau: f64, t: f64, v0: f64) -> (f64, f64, f64) {
     (v0 * (0.5 * tau + t / (2.0 * PI) * s), v0 * 0.5 * (1.0 + c), v0 * 0.5 * PI / t * s)
 }
 
+/// Re-approach after `tau` s from vertical velocity `v0` (signed, task y): the velocity blends
+/// (cosine, over `ramp`) to the approach speed downwards, then stays there. Returns the signed
+/// (displacement, velocity, acceleration) along task y.
+#[inline]
+pub fn reapproach_profile(tau: f64, ramp: f64, v0: f64, approach_speed: f64) -> (f64, f64, f64) {
+    use std::f64::consts::PI;
+    let dv = -approach_speed - v0;
+    if tau <= 0.0 {
+        (0.0, v0, 0.0)
+    } else if tau < ramp {
+        let (s, c) = (PI * tau / ramp).sin_cos();
+        (v0 * tau + dv * (0.5 * tau - ramp / (2.0 * PI) * s), v0 + dv * 0.5 * (1.0 - c), dv * 0.5 * PI / ramp * s)
+    } else {
+        (v0 * tau + dv * (tau - 0.5 * ramp), -approach_speed, 0.0)
+    }
+}
+
 /// Inside a force-controlled phase: is the wheel pressing, or finding the strip again after it
 /// lost contact (a safe stop lifted it off)?
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Contact {
     Pressing,
-    /// Position-controlled descent from `y0` at the approach speed, started at `t0`.
-    Reapproach { t0: f64, y0: f64 },
+    /// Position-controlled descent from `y0` and vertical velocity `v0` (task y, signed) to the
+    /// approach speed, started at `t0` ([`reapproach_profile`]).
+    Reapproach { t0: f64, y0: f64, v0: f64 },
     /// Stopping from `v0` at `y0`, started at `t0`.
     Touchdown { t0: f64, y0: f64, v0: f64 },
 }
@@ -254,6 +272,7 @@ pub struct ReferenceGenerator {
     /// the force to blend from (None: none pending) with the time its blend starts.
     reengage_t0: f64,
     pos_offset_m: Vector3<f64>,
+    vel_offset_mps: Vector3<f64>,
     force_from: Option<(f64, f64)>,
     /// Time the plan stood still (re-contact, or the plant not running: [`Self::hold`]), s; the
     /// plan runs on `t − held_s`, the re-engagement and re-contact on `t` itself.
@@ -283,6 +302,7 @@ impl ReferenceGenerator {
             contact: Contact::Pressing,
             reengage_t0: 0.0,
             pos_offset_m: Vector3::zeros(),
+            vel_offset_mps: Vector3::zeros(),
             force_from: None,
             held_s: 0.0,
             last_t: None,
@@ -306,19 +326,29 @@ impl ReferenceGenerator {
     /// a force phase the force set-point starts from the measured `force_y_n` (or, if the wheel
     /// is off the strip, the strip is found again first). No torque step: the law starts from
     /// the measured state, like the take-over return move.
-    pub fn reengage(&mut self, t: f64, tcp_task_m: &Vector3<f64>, force_y_n: f64) {
-        let plan = self.reference_at(t - self.held_s, t);
-        self.reengage_t0 = t;
-        self.pos_offset_m = tcp_task_m - plan.pos_m;
-        if plan.force_mode {
-            self.pos_offset_m.y = 0.0;
+    pub fn reengage(&mut self, t: f64, tcp_task_m: &Vector3<f64>, tcp_vel_task_mps: &Vector3<f64>, force_y_n: f64) {
+        // The plan stood still since the last tick this controller saw (the plant was stopped).
+        if let Some(last) = self.last_t {
+            self.held_s += t - last;
+        }
+        self.last_t = Some(t);
+        self.pos_offset_m = Vector3::zeros();
+        self.vel_offset_mps = Vector3::zeros();
+        self.force_from = None;
+        self.contact = Contact::Pressing;
+        let t_plan = t - self.held_s;
+        if self.reference_at(t_plan, t).force_mode {
             if force_y_n.abs() > self.p.contact_threshold_n {
-                self.contact = Contact::Pressing;
                 self.force_from = Some((t, force_y_n));
             } else {
-                self.contact = Contact::Reapproach { t0: t, y0: tcp_task_m.y };
+                self.contact = Contact::Reapproach { t0: t, y0: tcp_task_m.y, v0: tcp_vel_task_mps.y };
             }
         }
+        // The plan as it now runs (standing still while the strip is found again).
+        let plan = self.reference_at(t_plan, t);
+        self.reengage_t0 = t;
+        self.pos_offset_m = tcp_task_m - plan.pos_m;
+        self.vel_offset_mps = tcp_vel_task_mps - plan.vel_mps;
     }
 
     pub fn params(&self) -> &ReferenceParams {
@@ -416,13 +446,20 @@ impl ReferenceGenerator {
         }
         let p = self.p;
         self.contact = match self.contact {
-            Contact::Pressing if force_y_n.abs() < 0.5 * p.contact_threshold_n => Contact::Reapproach { t0: t, y0: tcp_y_m },
-            Contact::Reapproach { t0, y0 } if force_y_n.abs() > p.contact_threshold_n => {
-                let (d, v, _) = approach_profile(t - t0, p.approach_ramp_s, p.approach_speed_mps, p.approach_max_descent_m);
-                Contact::Touchdown { t0: t, y0: y0 - d, v0: v }
+            Contact::Pressing if force_y_n.abs() < 0.5 * p.contact_threshold_n => Contact::Reapproach { t0: t, y0: tcp_y_m, v0: 0.0 },
+            Contact::Reapproach { t0, y0, v0 } if force_y_n.abs() > p.contact_threshold_n => {
+                let (d, v, _) = reapproach_profile(t - t0, p.approach_ramp_s, v0, p.approach_speed_mps);
+                Contact::Touchdown { t0: t, y0: y0 + d, v0: -v }
             }
             Contact::Touchdown { t0, .. } if t - t0 >= TOUCHDOWN_S => {
                 self.force_from = Some((t, force_y_n));
+                // The plan moves again: ease into its velocity instead of stepping to it (the
+                // arm stood still while the strip was found again).
+                self.contact = Contact::Pressing;
+                let plan = self.reference_at(t - self.held_s, t);
+                self.pos_offset_m = Vector3::zeros();
+                self.vel_offset_mps = -plan.vel_mps;
+                self.reengage_t0 = t;
                 Contact::Pressing
             }
             c => c,
@@ -526,6 +563,12 @@ impl ReferenceGenerator {
                 r.pos_m.y = p.lift_y_m;
             }
         }
+        if self.holds_clock() {
+            // The plan stands still: so do its velocities (the roll waits for the strip).
+            r.vel_mps = Vector3::zeros();
+            r.acc_mps2 = Vector3::zeros();
+            r.force_rate_y_nps = 0.0;
+        }
         self.adjust(t_run, &mut r);
         r
     }
@@ -533,41 +576,50 @@ impl ReferenceGenerator {
     /// The re-engagement's and re-contact's changes to the plan at `t`.
     fn adjust(&self, t: f64, r: &mut TaskReference) {
         let p = &self.p;
-        // Measured − planned pose at the re-engagement, decaying C¹ to zero.
-        if self.pos_offset_m != Vector3::zeros() {
-            let (b, db, ddb) = cosine_blend((t - self.reengage_t0) / REENGAGE_S);
-            let mut o = self.pos_offset_m;
-            if r.force_mode {
-                o.y = 0.0;
-            }
-            r.pos_m += o * (1.0 - b);
-            r.vel_mps -= o * (db / REENGAGE_S);
-            r.acc_mps2 -= o * (ddb / (REENGAGE_S * REENGAGE_S));
-        }
-        if !r.force_mode {
-            return;
-        }
-        match self.contact {
-            Contact::Pressing => {
-                if let Some((t0, f0)) = self.force_from {
-                    let (b, db, _) = cosine_blend((t - t0) / REENGAGE_S);
-                    r.force_rate_y_nps = r.force_rate_y_nps * b + (r.force_y_n - f0) * db / REENGAGE_S;
-                    r.force_y_n = f0 + (r.force_y_n - f0) * b;
+        if r.force_mode {
+            match self.contact {
+                Contact::Pressing => {
+                    if let Some((t0, f0)) = self.force_from {
+                        let (b, db, _) = cosine_blend((t - t0) / REENGAGE_S);
+                        r.force_rate_y_nps = r.force_rate_y_nps * b + (r.force_y_n - f0) * db / REENGAGE_S;
+                        r.force_y_n = f0 + (r.force_y_n - f0) * b;
+                    }
+                }
+                Contact::Reapproach { t0, y0, v0 } => {
+                    let (d, v, a) = reapproach_profile(t - t0, p.approach_ramp_s, v0, p.approach_speed_mps);
+                    r.force_mode = false;
+                    r.pos_m.y = y0 + d;
+                    r.vel_mps.y = v;
+                    r.acc_mps2.y = a;
+                }
+                Contact::Touchdown { t0, y0, v0 } => {
+                    let (d, v, a) = touchdown_profile(t - t0, TOUCHDOWN_S, v0);
+                    r.force_mode = false;
+                    r.pos_m.y = y0 - d;
+                    r.vel_mps.y = -v;
+                    r.acc_mps2.y = a;
                 }
             }
-            Contact::Reapproach { t0, y0 } => {
-                let (d, v, a) = approach_profile(t - t0, p.approach_ramp_s, p.approach_speed_mps, p.approach_max_descent_m);
-                r.force_mode = false;
-                r.pos_m.y = y0 - d;
-                r.vel_mps.y = -v;
-                r.acc_mps2.y = -a;
+        }
+        // Measured − planned pose and velocity at the re-engagement, fading out along a cubic
+        // Hermite curve over REENGAGE_S (value and slope matched at both ends: the reference
+        // starts at the measured state and joins the plan C¹).
+        if self.pos_offset_m != Vector3::zeros() || self.vel_offset_mps != Vector3::zeros() {
+            let tt = REENGAGE_S;
+            let x = ((t - self.reengage_t0) / tt).clamp(0.0, 1.0);
+            let (h00, h10) = (2.0 * x * x * x - 3.0 * x * x + 1.0, x * x * x - 2.0 * x * x + x);
+            let (d00, d10) = ((6.0 * x * x - 6.0 * x) / tt, 3.0 * x * x - 4.0 * x + 1.0);
+            let (a00, a10) = ((12.0 * x - 6.0) / (tt * tt), (6.0 * x - 4.0) / tt);
+            let (mut o, mut ov) = (self.pos_offset_m, self.vel_offset_mps);
+            // Task y belongs to the force law or to the re-contact's own profile there.
+            if r.force_mode || !matches!(self.contact, Contact::Pressing) {
+                o.y = 0.0;
+                ov.y = 0.0;
             }
-            Contact::Touchdown { t0, y0, v0 } => {
-                let (d, v, a) = touchdown_profile(t - t0, TOUCHDOWN_S, v0);
-                r.force_mode = false;
-                r.pos_m.y = y0 - d;
-                r.vel_mps.y = -v;
-                r.acc_mps2.y = a;
+            if x < 1.0 {
+                r.pos_m += o * h00 + ov * (h10 * tt);
+                r.vel_mps += o * d00 + ov * d10;
+                r.acc_mps2 += o * a00 + ov * a10;
             }
         }
     }
@@ -746,11 +798,12 @@ mod tests {
         let planned = g.update(t, -10.0, y);
         assert_eq!(planned.phase, Phase::Roll);
         let here = planned.pos_m + Vector3::new(0.4e-3, 1e-3, 0.0);
-        g.reengage(t, &here, 0.0);
+        g.reengage(t, &here, &Vector3::new(0.0, 0.02, 0.0), 0.0);
         assert!(g.holds_clock(), "off the strip: the roll waits");
         let r = g.update(t, 0.0, here.y);
         assert!(!r.force_mode);
         assert!((r.pos_m - here).norm() < 1e-12, "starts where the arm is: {:?} vs {here:?}", r.pos_m);
+        assert!((r.vel_mps - Vector3::new(0.0, 0.02, 0.0)).norm() < 1e-12, "and as fast as it moves: {:?}", r.vel_mps);
         // Descend until contact; the roll does not advance meanwhile.
         let mut k = 1;
         let mut r = r;
