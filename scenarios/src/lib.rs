@@ -13,10 +13,11 @@ use std::path::{Path, PathBuf};
 /// (a 4 mm rectangle plus a half-disc of radius 4 mm on top). Plant and controller share it.
 pub const STRIP_TOP_HEIGHT_M: f64 = 0.008;
 
-/// Errors loading a scenario.
+/// Errors loading a scenario. A cause (the OS error of `Read`) is the error's `source()`, not
+/// part of its message, so that `{:#}` chains print it once.
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
-    #[error("cannot read scenario file {path}: {source}")]
+    #[error("cannot read scenario file {path}")]
     Read { path: PathBuf, source: std::io::Error },
     #[error("scenario file {path}, line {line}, column {column}: {message}")]
     Parse { path: PathBuf, line: usize, column: usize, message: String },
