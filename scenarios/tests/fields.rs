@@ -162,6 +162,17 @@ fn the_defaults_are_valid_and_an_empty_file_gets_them() {
 }
 
 #[test]
+fn a_scenario_written_out_in_full_loads_back() {
+    // sweeps and `--set` write whole tables; every shipped scenario survives that round trip
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for name in ["default.toml", "thesis.toml", "bond.toml", "bond_scheduled.toml"] {
+        let s = Scenario::load(&dir.join(name)).unwrap();
+        let text = toml::to_string(&s).unwrap();
+        assert_eq!(load(&text).unwrap_or_else(|e| panic!("{name}: {e}")), s, "{name}");
+    }
+}
+
+#[test]
 fn every_field_refuses_bad_values_naming_file_line_and_field() {
     let mut checked = 0;
     for f in FIELDS {
@@ -314,6 +325,11 @@ fn the_readme_lists_every_field_as_the_table_says() {
         _ => panic!("{} lacks the markers {BEGIN:?} ... {END:?}", path.display()),
     };
     let table = fields::markdown_table();
+    for row in table.lines() {
+        // a '|' in a meaning or range would split its cell
+        assert_eq!(row.matches('|').count(), 7, "not six cells: {row}");
+    }
+    assert_eq!(table.lines().count(), 2 + FIELDS.len());
     if std::env::var_os("UPDATE_README").is_some() {
         std::fs::write(&path, format!("{}{table}{}", &readme[..start], &readme[end..])).unwrap();
         return;
