@@ -117,20 +117,12 @@ fn a_type(v: &DeValue<'_>) -> String {
     format!("{article} {t}")
 }
 
-fn unit_suffix(f: &Field) -> String {
-    if f.unit.is_empty() {
-        String::new()
-    } else {
-        format!(" {}", f.unit)
-    }
-}
-
-/// " (s)" after "must be a number": the unit a type error asks for.
-fn unit_wanted(f: &Field) -> String {
-    if f.unit.is_empty() {
-        String::new()
-    } else {
-        format!(" ({})", f.unit)
+/// " s" after a range, or " (s)" after "must be a number" (`parens`): the field's unit.
+fn unit_text(f: &Field, parens: bool) -> String {
+    match (f.unit.is_empty(), parens) {
+        (true, _) => String::new(),
+        (false, false) => format!(" {}", f.unit),
+        (false, true) => format!(" ({})", f.unit),
     }
 }
 
@@ -209,16 +201,16 @@ impl Walker<'_> {
         let val = v.get_ref();
         match f.kind {
             Kind::Float if !is_number(val) => {
-                self.bad(key, line, v, format!("must be a number{}, not {}", unit_wanted(f), a_type(val)))
+                self.bad(key, line, v, format!("must be a number{}, not {}", unit_text(f, true), a_type(val)))
             }
             Kind::Int => match val.as_integer() {
-                None => self.bad(key, line, v, format!("must be a whole number{}, not {}", unit_wanted(f), a_type(val))),
+                None => self.bad(key, line, v, format!("must be a whole number{}, not {}", unit_text(f, true), a_type(val))),
                 Some(i) => {
                     // as i128 so that a negative or huge count is named as out of range, not as a
                     // serde overflow
                     let n = i128::from_str_radix(i.as_str(), i.radix()).map_or(f64::INFINITY, |n| n as f64);
                     if !f.range.contains(n, None) {
-                        self.bad(key, line, v, format!("must be in {}{}", f.range.text(), unit_suffix(f)));
+                        self.bad(key, line, v, format!("must be in {}{}", f.range.text(), unit_text(f, false)));
                     }
                 }
             },
@@ -234,7 +226,7 @@ impl Walker<'_> {
                         let el = line_col(self.text, e.span().start).0;
                         self.note(&ek, el, e);
                         if !is_number(e.get_ref()) {
-                            self.bad(ek, el, e, format!("must be a number{}, not {}", unit_wanted(f), a_type(e.get_ref())));
+                            self.bad(ek, el, e, format!("must be a number{}, not {}", unit_text(f, true), a_type(e.get_ref())));
                         }
                     }
                 }
@@ -304,7 +296,7 @@ pub(crate) fn values(s: &Scenario, path: &Path, spans: Option<&Spans>) -> Result
         Err(bad(name, fmt_num(x), format!("must be {finite}in {}{now}{unit}", range.text())))
     };
     let check = |f: &Field, pass: Pass| -> Result<(), ScenarioError> {
-        let unit = unit_suffix(f);
+        let unit = unit_text(f, false);
         let v = lookup(&doc, f.key);
         match f.kind {
             Kind::Float | Kind::Int => in_range(f.key.into(), v.and_then(as_f64).unwrap_or(f64::NAN), &f.range, &unit, pass)?,
