@@ -332,8 +332,8 @@ pub(crate) fn values(s: &Scenario, path: &Path, spans: Option<&Spans>) -> Result
             Kind::Bool | Kind::Text => {}
         }
         if let (Pass::Relative, Some(rule)) = (pass, f.rule) {
-            if !(rule.holds)(s) {
-                return Err(bad(f.key.into(), v.map_or_else(|| "?".into(), fmt_value), format!("must be {}", rule.text)));
+            if let Err(instead) = (rule.check)(s) {
+                return Err(bad(f.key.into(), v.map_or_else(|| "?".into(), fmt_value), format!("must be {} ({instead})", rule.text)));
             }
         }
         Ok(())

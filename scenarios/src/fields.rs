@@ -64,7 +64,8 @@ pub struct Range {
 pub struct Rule {
     /// What must hold, worded to follow "must be" (the README and the error message say it).
     pub text: &'static str,
-    pub holds: fn(&Scenario) -> bool,
+    /// Ok, or what the scenario has instead (its numbers, for the message).
+    pub check: fn(&Scenario) -> Result<(), String>,
 }
 
 /// One scenario field.
@@ -132,8 +133,18 @@ const fn flag(key: &'static str, meaning: &'static str) -> Field {
 const fn choice(key: &'static str, names: &'static [&'static str], meaning: &'static str) -> Field {
     Field { key, kind: Kind::Choice(names), unit: "", range: ANY, rule: None, meaning }
 }
-const fn with_rule(f: Field, text: &'static str, holds: fn(&Scenario) -> bool) -> Field {
-    Field { rule: Some(Rule { text, holds }), ..f }
+const fn with_rule(f: Field, text: &'static str, check: fn(&Scenario) -> Result<(), String>) -> Field {
+    Field { rule: Some(Rule { text, check }), ..f }
+}
+
+/// A peak speed (mm/s) against the TCP speed reflex.
+fn below_tcp_limit(what: &str, peak_mm_s: f64, s: &Scenario) -> Result<(), String> {
+    let limit = 1e3 * s.safety.max_tcp_speed_mps;
+    if peak_mm_s < limit {
+        Ok(())
+    } else {
+        Err(format!("the {what} peaks at {} mm/s, the limit is {} mm/s", fmt_num(peak_mm_s), fmt_num(limit)))
+    }
 }
 
 /// The strip's height at its centre line, mm: a bulge may not reach it.
@@ -163,7 +174,10 @@ pub static FIELDS: &[Field] = &[
     with_rule(
         num("loop.duration_s", "s", NON_NEGATIVE, "Run length (`rig run --duration` overrides it); 0 = until the trajectory ends plus 0.2 s."),
         "0 or at least loop.period_s",
-        |s| s.loop_.duration_s == 0.0 || s.loop_.duration_s >= s.loop_.period_s,
+        |s| {
+            let l = &s.loop_;
+            if l.duration_s == 0.0 || l.duration_s >= l.period_s { Ok(()) } else { Err(format!("the period is {} s", fmt_num(l.period_s))) }
+        },
     ),
     int("loop.substeps", "", range(lo_in(1.0), hi_in(1000.0)), "Plant integration substeps per tick (robot integrator and strip ZOH steps)."),
     choice("loop.integrator", &["midpoint", "rk4"], "Robot integrator per substep: explicit midpoint (2 forward-dynamics calls) or classic fourth-order Runge–Kutta (4 calls)."),
@@ -195,7 +209,7 @@ pub static FIELDS: &[Field] = &[
     with_rule(
         num("strip.damping_beta", "s", NON_NEGATIVE, "Rayleigh damping B = alpha M + beta K (5.24): the stiffness factor."),
         "> 0 when strip.damping_alpha = 0 (balanced truncation needs a damped system)",
-        |s| s.strip.damping_alpha > 0.0 || s.strip.damping_beta > 0.0,
+        |s| if s.strip.damping_alpha > 0.0 || s.strip.damping_beta > 0.0 { Ok(()) } else { Err("strip.damping_alpha is 0 too".into()) },
     ),
     // [bulge]
     num("bulge.height_mm", "mm", range(lo_ex(-STRIP_TOP_MM), hi_ex(STRIP_TOP_MM)), "Peak height of the raised-cosine bump of the substrate under the strip (negative: a dip); less than the strip's 8 mm height at its centre."),
@@ -232,14 +246,14 @@ pub static FIELDS: &[Field] = &[
     with_rule(
         num("trajectory.roll_s", "s", POSITIVE, "Rolling time with the cosine velocity profile."),
         "long enough for a peak rolling speed 2 (z_end_mm - z_start_mm) / roll_s below 1e3 safety.max_tcp_speed_mps (mm/s)",
-        |s| roll_peak_speed_mm_s(s) < 1e3 * s.safety.max_tcp_speed_mps,
+        |s| below_tcp_limit("roll", roll_peak_speed_mm_s(s), s),
     ),
     num("trajectory.ramp_down_s", "s", POSITIVE, "Force ramp-down time after rolling."),
     num("trajectory.lift_mm", "mm", range(lo_ex(0.0), hi_in(100.0)), "Lift-off height above the strip after the ramp-down."),
     with_rule(
         num("trajectory.lift_s", "s", POSITIVE, "Lift-off time (cosine blend)."),
         "long enough for a peak lift-off speed π lift_mm / (2 lift_s) below 1e3 safety.max_tcp_speed_mps (mm/s)",
-        |s| lift_peak_speed_mm_s(s) < 1e3 * s.safety.max_tcp_speed_mps,
+        |s| below_tcp_limit("lift-off", lift_peak_speed_mm_s(s), s),
     ),
     // [controller]
     num("controller.force_crossover_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Desired crossover of the force loop (Section 6.2: about 25 Hz); below the Nyquist frequency."),

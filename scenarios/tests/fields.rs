@@ -267,6 +267,8 @@ fn rules_across_fields_are_checked_and_named() {
         let place = if line == 0 { Place::Default } else { Place::Line(line) };
         assert_eq!(e.place(), Some(place), "{text}: {e}");
     }
+    let e = load("[trajectory]\nroll_s = 0.1\n").unwrap_err().to_string();
+    assert!(e.ends_with("(mm/s) (the roll peaks at 720 mm/s, the limit is 250 mm/s)"), "{e}");
     assert!(load("[trajectory]\nroll_s = 0.1\n[safety]\nmax_tcp_speed_mps = 1\n").is_ok());
     assert!(load("[strip]\ndamping_alpha = 0\n").is_ok());
     assert!(load("[loop]\nduration_s = 0.001\n").is_ok());
