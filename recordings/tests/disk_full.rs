@@ -1,12 +1,12 @@
 //! A really full disk (ENOSPC from a 384 KiB tmpfs) in the middle of a recording: the writer stops
-//! with a reason naming the error, the loop side never blocks, and the file keeps its complete
-//! chunks. The tmpfs lives in a private mount namespace (`unshare`), so the inner test runs in a
+//! with a reason naming the error, the loop side never blocks, and the file is cut back to its
+//! complete chunks and ended there, finalised, with the same story as the 64 MiB reserve. The tmpfs lives in a private mount namespace (`unshare`), so the inner test runs in a
 //! child process: the outer test starts it there and checks that it ran and passed.
 
 use std::path::PathBuf;
 use std::process::Command;
 
-use recordings::read::Recording;
+use recordings::read::{Integrity, Recording};
 use recordings::synthetic::SyntheticRun;
 use recordings::{EventKind, Recorder, RecorderConfig, RecorderTuning, RecordingSummary};
 
@@ -73,17 +73,23 @@ fn record(path: &std::path::Path, tuning: RecorderTuning) -> RecordingSummary {
 fn inner_full_disk() {
     let dir = PathBuf::from(std::env::var(DIR_ENV).expect("started by the outer test"));
     // 1. No reserve: the disk really fills, write(2) fails with ENOSPC mid-chunk. The file keeps
-    //    its complete chunks and reads back as truncated.
+    //    its complete chunks, ends with the stop event, summary metadata and a footer, and reads
+    //    back complete, as stopped early, with exactly the ticks the writer says it kept.
     let path = dir.join("full.mcap");
     let s = record(&path, RecorderTuning { min_free_bytes: 0, ..Default::default() });
-    assert!(!s.finalised);
+    assert!(s.finalised, "{s:?}");
     let why = s.stopped_early.clone().unwrap();
-    assert!(why.contains("write failed") && why.to_lowercase().contains("no space left"), "{why}");
-    assert!(s.bytes <= TMPFS_BYTES);
-    let back = Recording::open(&path).unwrap();
-    assert!(back.truncated.is_some());
-    assert!(!back.joint_state.is_empty() && back.joint_state.len() as u64 <= s.ticks_written, "{}", back.joint_state.len());
+    assert!(why.starts_with("disk full (ENOSPC) at tick ") && why.contains("No space left on device"), "{why}");
+    assert!(s.lost_after_stop > 0 && s.bytes <= TMPFS_BYTES, "{s:?}");
+    let back = Recording::open_complete(&path).unwrap();
+    assert_eq!(back.integrity, Integrity::StoppedEarly(why.clone()));
+    assert_eq!(back.joint_state.len() as u64, s.ticks_written);
+    assert!(why.contains(&format!("the file keeps the ticks up to {}", back.joint_state.last().unwrap().tick)), "{why}");
     back.check_continuity().unwrap();
+    let ev: Vec<_> = back.events_of(EventKind::RecordingError).collect();
+    assert_eq!(ev.len(), 1);
+    assert!(why.starts_with(&ev[0].text), "{:?}", ev[0].text);
+    assert_eq!(back.summary_metadata("ticks_written"), Some(s.ticks_written.to_string().as_str()));
     std::fs::remove_file(&path).unwrap();
     // 2. The default reserve (64 MiB) on the same small disk: the first chunk close finds too
     //    little space, the writer records why and finalises a complete file.
