@@ -6,12 +6,14 @@
 //! so a SIGKILL loses at most that much; chunks are built in memory, so the file never holds a
 //! half-written chunk except when the process dies inside one `write`. [`Recorder::finish`]
 //! writes the summary and index. A disk that runs low (below [`RecorderTuning::min_free_bytes`])
-//! ends the recording cleanly with an `/events` entry. A hard write error (ENOSPC, EFBIG, EIO)
-//! tells the same story: the file is cut back to its last complete chunk and ended there with the
-//! `/events` entry, the `recording_summary` metadata and a footer (no summary section), written
-//! into [`FINALE_RESERVE_BYTES`] kept allocated past the end of the file. Either way
-//! [`RecordingSummary::stopped_early`] says why and the writer keeps draining the queue, so the
-//! loop never notices.
+//! ends the recording cleanly with an `/events` entry. A full disk tells the same story: after
+//! every chunk the writer keeps room for the next chunk and the file's end allocated past the end
+//! of the file ([`RecorderTuning::tail_reserve_bytes`], `fallocate` KEEP_SIZE), so ENOSPC shows
+//! up there, between chunks, and the file is ended in that room with the `/events` entry, the
+//! `recording_summary` metadata and a footer (no summary section). A write that fails anyway
+//! (no reserve on this file system, EFBIG, EIO) cuts the file back to its last complete chunk and
+//! ends it the same way if it can. Either way [`RecordingSummary::stopped_early`] says why and the
+//! writer keeps draining the queue, so the loop never notices.
 
 use crate::schema::{self, TickHead, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::{sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, MAX_CENTRELINE, RECORDING_FORMAT_VERSION};
@@ -66,6 +68,10 @@ pub struct RecorderTuning {
     pub compression_level: u32,
     /// Writer sleep when the queue is empty.
     pub idle_sleep: Duration,
+    /// Bytes kept allocated past the end of the file after every chunk: room for the next chunk
+    /// and for ending the file. None: twice the chunk size plus 64 KiB; 0: none (a full disk is
+    /// then met by a failing write in the middle of a chunk).
+    pub tail_reserve_bytes: Option<u64>,
 }
 
 impl Default for RecorderTuning {
@@ -75,6 +81,7 @@ impl Default for RecorderTuning {
             max_flush_interval: Duration::from_secs(1),
             compression_level: 0,
             idle_sleep: Duration::from_millis(2),
+            tail_reserve_bytes: None,
         }
     }
 }
@@ -149,10 +156,6 @@ type McapFile = mcap::Writer<BufWriter<SlicedFile>>;
 
 /// Largest single `write(2)` of a recording, bytes.
 const WRITE_SLICE_BYTES: usize = 16 * 1024;
-
-/// Bytes kept allocated past the end of the file (`fallocate` KEEP_SIZE after every chunk), so
-/// that after ENOSPC the `/events` entry, summary metadata and footer still fit (about 1 KiB).
-pub const FINALE_RESERVE_BYTES: u64 = 16 * 1024;
 
 /// The recording's file, written at most [`WRITE_SLICE_BYTES`] per system call. A kernel built
 /// without preemption (`PREEMPT_NONE`, common on cloud VMs) runs a syscall to its end before a
@@ -245,6 +248,7 @@ impl Recorder {
         }
         while consumer.pop().is_ok() {}
         let shared = Arc::new(Shared::default());
+        let reserve = tuning.tail_reserve_bytes.unwrap_or(2 * cfg.chunk_size_bytes + (64 << 10));
         let mut writer = WriterThread {
             mcap: Some(mcap),
             channel_ids,
@@ -268,8 +272,8 @@ impl Recorder {
             fd,
             position,
             kept: Kept::default(),
+            reserve,
         };
-        writer.chunk_complete();
         let thread = std::thread::Builder::new()
             .name("recorder".into())
             .spawn(move || writer.run())
@@ -409,6 +413,8 @@ struct WriterThread {
     position: Arc<AtomicU64>,
     /// What the file holds up to the end of its last complete chunk.
     kept: Kept,
+    /// Bytes to keep allocated past the end of the file (0: none, or not supported here).
+    reserve: u64,
 }
 
 /// The state at the end of the last complete chunk: what a write error falls back to.
@@ -423,6 +429,7 @@ struct Kept {
 
 impl WriterThread {
     fn run(&mut self) -> RecordingSummary {
+        self.chunk_complete();
         loop {
             if let Some(item) = self.pop() {
                 self.handle(item);
@@ -547,7 +554,9 @@ impl WriterThread {
             self.fail(&e);
             return;
         }
-        self.chunk_complete();
+        if !self.chunk_complete() {
+            return;
+        }
         self.bytes_since_flush = 0;
         self.last_flush = Instant::now();
         if let Some(free) = free_bytes(&self.path) {
@@ -572,8 +581,9 @@ impl WriterThread {
     }
 
     /// The chunk just flushed is complete in the file: remember where it ends and what it holds,
-    /// and keep [`FINALE_RESERVE_BYTES`] allocated past it.
-    fn chunk_complete(&mut self) {
+    /// and keep the tail reserve allocated past it. False if there is no room for the reserve:
+    /// then the recording is ended here, in what is left of the previous reserve.
+    fn chunk_complete(&mut self) -> bool {
         let bytes = self.position.load(Ordering::Relaxed);
         self.kept = Kept {
             bytes,
@@ -582,23 +592,46 @@ impl WriterThread {
             last_tick: self.last_tick,
             last_sim_time_s: self.last_sim_time_s,
         };
-        // SAFETY: fd is the open recording (owned by self.mcap). Best effort: without the
-        // reserve a write error may leave the file unfinalised, which the reader reports as cut.
-        unsafe { libc::fallocate(self.fd, libc::FALLOC_FL_KEEP_SIZE, bytes as i64, FINALE_RESERVE_BYTES as i64) };
+        if self.reserve == 0 {
+            return true;
+        }
+        // SAFETY: fd is the open recording, owned by self.mcap for as long as the writer runs.
+        let rc = unsafe { libc::fallocate(self.fd, libc::FALLOC_FL_KEEP_SIZE, bytes as i64, self.reserve as i64) };
+        if rc == 0 {
+            return true;
+        }
+        let err = std::io::Error::last_os_error();
+        match err.raw_os_error() {
+            Some(libc::ENOSPC | libc::EDQUOT) => {
+                let what = format!("no room to keep {} KiB allocated past the end of the file", self.reserve >> 10);
+                self.stop(&err, &what);
+                false
+            }
+            _ => {
+                tracing::warn!(path = %self.path.display(), "cannot keep room past the end of the recording ({err}): a full disk will cut it mid-chunk");
+                self.reserve = 0;
+                true
+            }
+        }
+    }
+
+    /// Ends the recording after its last complete chunk because of `err` while doing `what`.
+    fn stop(&mut self, err: &(dyn std::error::Error + 'static), what: &str) {
+        // Not finish(): the summary would go to a failing disk. Take the file back without
+        // flushing what is still buffered.
+        let file = self.mcap.take().map(|m| m.into_inner().into_parts().0 .0);
+        self.stop_on_error(err, what, file);
     }
 
     /// A hard write error (ENOSPC, EFBIG, EIO): cut the file back to its last complete chunk and
     /// end it there (event, summary metadata, footer), the same story as the reserve tells.
     fn fail(&mut self, err: &mcap::McapError) {
-        // Not finish(): the summary would go to a failing disk. Take the file back without
-        // flushing what is still buffered.
-        let file = self.mcap.take().map(|m| m.into_inner().into_parts().0 .0);
-        self.stop_on_error(err, file);
+        self.stop(err, "write failed");
     }
 
-    fn stop_on_error(&mut self, err: &mcap::McapError, file: Option<File>) {
+    fn stop_on_error(&mut self, err: &(dyn std::error::Error + 'static), what: &str, file: Option<File>) {
         let mut why = format!(
-            "{} at tick {}: write failed: {}; the file keeps the ticks up to {}",
+            "{} at tick {}: {what}: {}; the file keeps the ticks up to {}",
             os_error_name(err),
             self.last_tick,
             error_chain(err),
@@ -625,7 +658,9 @@ impl WriterThread {
         let e = EventRecord::new(self.kept.last_tick, self.kept.last_sim_time_s, EventKind::RecordingError, why);
         self.events_written += 1;
         let finale = self.finale(&e);
-        let res = file.set_len(self.kept.bytes).and_then(|_| file.write_all_at(&finale, self.kept.bytes));
+        let end = self.kept.bytes + finale.len() as u64;
+        // the second set_len gives back what is left of the tail reserve
+        let res = file.set_len(self.kept.bytes).and_then(|_| file.write_all_at(&finale, self.kept.bytes)).and_then(|_| file.set_len(end));
         match res {
             Ok(()) => self.finalised = true,
             Err(err) => {
@@ -708,6 +743,8 @@ impl WriterThread {
                 match w.flush() {
                     Ok(()) => {
                         self.finalised = true;
+                        // give back the tail reserve (a file system keeps it past close)
+                        let _ = w.into_parts().0 .0.set_len(self.position.load(Ordering::Relaxed));
                         return true;
                     }
                     Err(e) => (mcap::McapError::from(e), w.into_parts().0 .0),
@@ -715,7 +752,7 @@ impl WriterThread {
             }
             Err(e) => (e, mcap.into_inner().into_parts().0 .0),
         };
-        self.stop_on_error(&err, Some(file));
+        self.stop_on_error(&err, "write failed", Some(file));
         self.finalised
     }
 }
