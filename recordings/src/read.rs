@@ -46,7 +46,7 @@ pub enum ReadError {
 }
 
 /// Where and why reading stopped early.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct Damage {
     /// The chunk (counting from 0 in file order) where reading stopped, if it stopped at one.
     pub chunk: Option<usize>,
@@ -433,9 +433,11 @@ fn check_schema(path: &Path, ch: &mcap::records::Channel, schema: Option<&Schema
     Ok(())
 }
 
-/// The record at byte `at`: opcode, body and where the next one starts; None at the very end;
-/// Err(why) if the record does not fit in `bytes`.
-fn record_at(bytes: &[u8], at: usize) -> Result<Option<(u8, &[u8], usize)>, String> {
+/// One MCAP record in a byte slice: opcode, body, and where the next record starts.
+type RawRecord<'a> = (u8, &'a [u8], usize);
+
+/// The record at byte `at`; None at the very end; Err(why) if the record does not fit in `bytes`.
+fn record_at(bytes: &[u8], at: usize) -> Result<Option<RawRecord<'_>>, String> {
     let rest = &bytes[at..];
     if rest.is_empty() {
         return Ok(None);

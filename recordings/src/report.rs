@@ -89,6 +89,8 @@ pub struct ReportNumbers {
     pub integrity: &'static str,
     /// Why and, for a cut or corrupt file, where (chunk, byte offset, first tick lost).
     pub integrity_detail: Option<String>,
+    /// The same where and why as fields, for a cut or corrupt file.
+    pub damage: Option<crate::read::Damage>,
     pub ticks: usize,
     pub first_tick: u64,
     pub last_tick: u64,
@@ -172,6 +174,7 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         file: rec.path.display().to_string(),
         integrity: rec.integrity.kind(),
         integrity_detail: rec.integrity.describe(),
+        damage: rec.integrity.damage().cloned(),
         ticks,
         first_tick: rec.joint_state.first().map_or(0, |s| s.tick),
         last_tick: rec.joint_state.last().map_or(0, |s| s.tick),

@@ -161,14 +161,25 @@ const WRITE_SLICE_BYTES: usize = 16 * 1024;
 /// without preemption (`PREEMPT_NONE`, common on cloud VMs) runs a syscall to its end before a
 /// woken SCHED_FIFO thread on that CPU gets it: one chunk of a few hundred kB copied into the
 /// page cache in one `write` held the controller off its CPU for long enough to miss ticks. Each
-/// return to user space between slices lets a waiting real-time thread in. It also counts where
-/// the stream is, so the writer knows where its last complete chunk ends.
-struct SlicedFile(File, Arc<AtomicU64>);
+/// return to user space between slices lets a waiting real-time thread in. It also keeps a
+/// [`Tally`] of what went to the file, so the writer knows where its last complete chunk ends.
+struct SlicedFile(File, Arc<Tally>);
+
+/// Bytes written so far and their CRC-32 (the data section's, as long as it lasts): what ending
+/// the file after a write error needs. Only the writer thread touches it.
+#[derive(Default)]
+struct Tally {
+    position: AtomicU64,
+    crc: std::sync::Mutex<crc32fast::Hasher>,
+    /// Set by a seek that moved: the running CRC no longer is the file's.
+    seeked: AtomicBool,
+}
 
 impl std::io::Write for SlicedFile {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         let n = self.0.write(&buf[..buf.len().min(WRITE_SLICE_BYTES)])?;
-        self.1.fetch_add(n as u64, Ordering::Relaxed);
+        self.1.position.fetch_add(n as u64, Ordering::Relaxed);
+        self.1.crc.lock().unwrap_or_else(|e| e.into_inner()).update(&buf[..n]);
         Ok(n)
     }
 
@@ -178,9 +189,13 @@ impl std::io::Write for SlicedFile {
 }
 
 impl std::io::Seek for SlicedFile {
+    /// The writer runs with seeking disabled (it only asks where it is); a real seek would make
+    /// the running CRC meaningless, and the end after a write error then carries none.
     fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
         let at = self.0.seek(pos)?;
-        self.1.store(at, Ordering::Relaxed);
+        if self.1.position.swap(at, Ordering::Relaxed) != at {
+            self.1.seeked.store(true, Ordering::Relaxed);
+        }
         Ok(at)
     }
 }
@@ -210,7 +225,7 @@ impl Recorder {
         }
         let file = File::create(&path).map_err(|source| RecorderError::Create { path: path.clone(), source })?;
         let fd = std::os::fd::AsRawFd::as_raw_fd(&file);
-        let position = Arc::new(AtomicU64::new(0));
+        let tally = Arc::new(Tally::default());
         let mcap_err = |e: mcap::McapError| RecorderError::Mcap { path: path.clone(), what: error_chain(&e) };
         let mut mcap = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
@@ -221,7 +236,7 @@ impl Recorder {
             .chunk_size(None)
             .disable_seeking(true)
             .library(format!("rig-recordings {}", env!("CARGO_PKG_VERSION")))
-            .create(BufWriter::with_capacity(WRITE_SLICE_BYTES, SlicedFile(file, position.clone())))
+            .create(BufWriter::with_capacity(WRITE_SLICE_BYTES, SlicedFile(file, tally.clone())))
             .map_err(mcap_err)?;
         let mut channel_ids = [0u16; CHANNELS.len()];
         for (id, ch) in channel_ids.iter_mut().zip(CHANNELS.iter()) {
@@ -270,7 +285,7 @@ impl Recorder {
             stopped_early: None,
             finalised: false,
             fd,
-            position,
+            tally,
             kept: Kept::default(),
             reserve,
         };
@@ -409,8 +424,8 @@ struct WriterThread {
     finalised: bool,
     /// The file's descriptor (owned by `mcap`), for the tail reserve.
     fd: std::os::fd::RawFd,
-    /// Bytes handed to the file so far (kept by [`SlicedFile`]).
-    position: Arc<AtomicU64>,
+    /// What went to the file so far (kept by [`SlicedFile`]).
+    tally: Arc<Tally>,
     /// What the file holds up to the end of its last complete chunk.
     kept: Kept,
     /// Bytes to keep allocated past the end of the file (0: none, or not supported here).
@@ -418,9 +433,12 @@ struct WriterThread {
 }
 
 /// The state at the end of the last complete chunk: what a write error falls back to.
-#[derive(Default, Clone, Copy)]
+#[derive(Default, Clone)]
 struct Kept {
     bytes: u64,
+    /// CRC-32 of those bytes so far, to be finished over the end appended after a write error
+    /// (None if the writer ever seeked).
+    crc: Option<crc32fast::Hasher>,
     ticks: u64,
     events: u64,
     last_tick: u64,
@@ -584,9 +602,11 @@ impl WriterThread {
     /// and keep the tail reserve allocated past it. False if there is no room for the reserve:
     /// then the recording is ended here, in what is left of the previous reserve.
     fn chunk_complete(&mut self) -> bool {
-        let bytes = self.position.load(Ordering::Relaxed);
+        let bytes = self.tally.position.load(Ordering::Relaxed);
+        let crc = (!self.tally.seeked.load(Ordering::Relaxed)).then(|| self.tally.crc.lock().unwrap_or_else(|e| e.into_inner()).clone());
         self.kept = Kept {
             bytes,
+            crc,
             ticks: self.ticks_written,
             events: self.events_written,
             last_tick: self.last_tick,
@@ -676,7 +696,8 @@ impl WriterThread {
 
     /// The end of a file stopped by a write error, hand-encoded (the mcap writer is broken by
     /// then): the `/events` entry as a message outside any chunk, the `recording_summary`
-    /// metadata, a data-end record and a footer without summary (all CRCs 0: not computed).
+    /// metadata, a data-end record with the data section's CRC (so that these two records are
+    /// checked too) and a footer without summary.
     fn finale(&mut self, e: &EventRecord) -> Vec<u8> {
         fn record(out: &mut Vec<u8>, opcode: u8, body: &[u8]) {
             out.push(opcode);
@@ -706,7 +727,11 @@ impl WriterThread {
         body.extend_from_slice(&(entries.len() as u32).to_le_bytes());
         body.extend_from_slice(&entries);
         record(&mut out, op::METADATA, &body);
-        record(&mut out, op::DATA_END, &0u32.to_le_bytes());
+        let crc = self.kept.crc.clone().map_or(0, |mut h| {
+            h.update(&out);
+            h.finalize()
+        });
+        record(&mut out, op::DATA_END, &crc.to_le_bytes());
         record(&mut out, op::FOOTER, &[0u8; 20]);
         out.extend_from_slice(crate::read::MCAP_MAGIC);
         out
@@ -744,7 +769,7 @@ impl WriterThread {
                     Ok(()) => {
                         self.finalised = true;
                         // give back the tail reserve (a file system keeps it past close)
-                        let _ = w.into_parts().0 .0.set_len(self.position.load(Ordering::Relaxed));
+                        let _ = w.into_parts().0 .0.set_len(self.tally.position.load(Ordering::Relaxed));
                         return true;
                     }
                     Err(e) => (mcap::McapError::from(e), w.into_parts().0 .0),

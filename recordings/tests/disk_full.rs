@@ -96,6 +96,11 @@ fn inner_full_disk() {
         assert_eq!(ev.len(), 1);
         assert!(why.starts_with(&ev[0].text), "{:?}", ev[0].text);
         assert_eq!(back.summary_metadata("ticks_written"), Some(s.ticks_written.to_string().as_str()));
+        // The end written after the error carries the data section's CRC (the reader checked it).
+        let bytes = std::fs::read(&path).unwrap();
+        let data_end = &bytes[bytes.len() - 50..bytes.len() - 37];
+        assert_eq!(data_end[0], 0x0f, "data-end record before footer and magic");
+        assert_ne!(data_end[9..13], [0; 4], "a data section CRC, not 0");
         same_as_python(&path, &back);
         std::fs::remove_file(&path).unwrap();
     }
