@@ -257,14 +257,15 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
                 print!("{}", summary::timing_report(v));
             }
             print!("{}", summary::run_summary(v));
-            if !timing {
-                if let Some(path) = v.get("recording").and_then(serde_json::Value::as_str) {
-                    match recordings::cli::summary_numbers(Path::new(path)) {
-                        Ok(n) => print!("{}", recordings::report::format_text(&n)),
-                        Err(e) => eprintln!("rig: could not read back {path}: {e:#}"),
-                    }
+            let path = v.get("recording").and_then(serde_json::Value::as_str).filter(|_| !timing);
+            let numbers = path.and_then(|path| match recordings::cli::summary_numbers(Path::new(path)) {
+                Ok(n) => Some(n),
+                Err(e) => {
+                    eprintln!("rig: could not read back {path}: {e:#}");
+                    None
                 }
-            }
+            });
+            print!("{}", summary::recording_summary(v, numbers.as_ref()));
             if let Some(p) = json_out {
                 std::fs::write(p, serde_json::to_string_pretty(v)?).with_context(|| format!("writing {}", p.display()))?;
             }

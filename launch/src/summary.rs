@@ -1,5 +1,6 @@
 //! Human-readable summaries of a run and of a timing run, from the plant's JSON summary line.
 
+use recordings::report::ReportNumbers;
 use serde_json::Value;
 
 fn num(v: &Value, key: &str) -> f64 {
@@ -10,10 +11,10 @@ fn int(v: &Value, key: &str) -> u64 {
     v.get(key).and_then(Value::as_u64).unwrap_or(0)
 }
 
-/// The summary of `rig run`: ticks, misses, safe stops, round-trip latency p50/p99/max, recording.
+/// The summary of `rig run`: ticks, misses, safe stops, round-trip latency p50/p99/max (the
+/// recording follows in [`recording_summary`]).
 pub fn run_summary(v: &Value) -> String {
     let mut s = String::new();
-    let rec = v.get("recording").and_then(Value::as_str).unwrap_or("(not recorded)");
     s += &format!(
         "ticks {}  misses {}  safe stops {}  refused {}  overruns {}  recorder drops {}\n",
         int(v, "ticks"),
@@ -36,7 +37,23 @@ pub fn run_summary(v: &Value) -> String {
         num(v, "wall_s"),
         num(v, "speed_factor")
     );
-    s += &format!("recording {rec}\n");
+    s
+}
+
+/// The recording part of `rig run`'s summary, each line once: the report's numbers when the file
+/// reads back (their first line names it, a warning line says how it ends if not complete), else
+/// the path alone; plus one line with the plant's reason if the recording stopped early and the
+/// file does not say so itself.
+pub fn recording_summary(v: &Value, numbers: Option<&ReportNumbers>) -> String {
+    let mut s = match numbers {
+        Some(n) => recordings::report::format_text(n),
+        None => format!("recording   {}\n", v.get("recording").and_then(Value::as_str).unwrap_or("(not recorded)")),
+    };
+    if let Some(why) = v.get("recording_stopped_early").and_then(Value::as_str) {
+        if numbers.is_none_or(|n| n.integrity != "stopped_early") {
+            s += &format!("WARNING     the plant stopped the recording early: {why}\n");
+        }
+    }
     s
 }
 
@@ -113,10 +130,33 @@ mod tests {
     fn summary_names_every_required_number() {
         let v = serde_json::json!({"ticks": 1200, "misses": 3, "safe_stops": 1, "rt_p50_us": 21.5, "rt_p99_us": 60.25,
             "rt_max_us": 140.0, "recording": "runs/x/run.mcap", "drops": 0, "mode": "lockstep", "sim_s": 1.2, "wall_s": 0.05, "speed_factor": 24.0});
-        let s = run_summary(&v);
-        for needle in ["ticks 1200", "misses 3", "safe stops 1", "p50 21.5", "p99 60.2", "max 140.0", "runs/x/run.mcap", "24.0x"] {
+        let s = run_summary(&v) + &recording_summary(&v, None);
+        for needle in ["ticks 1200", "misses 3", "safe stops 1", "p50 21.5", "p99 60.2", "max 140.0", "recording   runs/x/run.mcap\n", "24.0x"] {
             assert!(s.contains(needle), "{needle:?} missing in {s}");
         }
+        assert_eq!(s.matches("recording").count(), 1, "{s}");
+    }
+
+    #[test]
+    fn the_recording_and_an_early_stop_are_each_named_once() {
+        let why = "disk full (ENOSPC) at tick 812: write failed";
+        let v = serde_json::json!({"recording": "runs/x/run.mcap", "recording_stopped_early": why});
+        let rec = recordings::read::Recording { path: "runs/x/run.mcap".into(), ..Default::default() };
+        let read_back = |integrity: recordings::read::Integrity| {
+            let mut n = recordings::report::numbers(&rec);
+            (n.integrity, n.integrity_detail) = (integrity.kind(), integrity.describe());
+            n
+        };
+        let stopped = read_back(recordings::read::Integrity::StoppedEarly(why.into()));
+        let complete = read_back(recordings::read::Integrity::Complete);
+        for s in [recording_summary(&v, None), recording_summary(&v, Some(&stopped)), recording_summary(&v, Some(&complete))] {
+            assert_eq!(s.matches("runs/x/run.mcap").count(), 1, "{s}");
+            assert_eq!(s.matches("stopped the recording early").count(), 1, "{s}");
+            assert_eq!(s.matches(why).count(), 1, "{s}");
+        }
+        let v = serde_json::json!({"recording": "runs/x/run.mcap", "recording_stopped_early": null});
+        let s = recording_summary(&v, Some(&complete));
+        assert!(!s.contains("early") && s.starts_with("recording   runs/x/run.mcap\n"), "{s}");
     }
 
     #[test]

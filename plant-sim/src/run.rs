@@ -50,6 +50,9 @@ pub struct RunSummary {
     pub stats: LoopStats,
     pub recording: Option<PathBuf>,
     pub drops: u64,
+    /// Why the recorder ended the recording before the run ended (disk full, write error), as
+    /// its `finish` reports it; the file then ends after its last complete chunk.
+    pub recording_stopped_early: Option<String>,
     pub mode: Mode,
     pub rt: rt::RtSetup,
 }
@@ -78,6 +81,7 @@ impl RunSummary {
             "rt_max_us": us(s.round_trip.max_ns()),
             "recording": self.recording.as_ref().map(|p| p.display().to_string()),
             "drops": self.drops,
+            "recording_stopped_early": self.recording_stopped_early,
             "wall_s": s.wall_s,
             "sim_s": s.sim_s,
             "speed_factor": if s.active_wall_s > 0.0 { s.active_sim_s / s.active_wall_s } else { 0.0 },
@@ -234,9 +238,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     }
     .run();
     let drops = recorder.as_ref().map_or(0, |r| r.dropped());
-    if let Some(r) = recorder {
-        r.finish().context("finishing the recording")?;
-    }
+    let recording_stopped_early = match recorder {
+        Some(r) => r.finish().context("finishing the recording")?.stopped_early,
+        None => None,
+    };
     tracing::info!(ticks = stats.ticks, misses = stats.misses, safe_stops = stats.safe_stops, "plant stopped");
-    Ok(RunSummary { stats, recording, drops, mode, rt: rt_setup })
+    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup })
 }

@@ -18,8 +18,9 @@ pub struct ReportArgs {
     /// (default: the wheel at 10, 30, 50, 70 and 90 % of its roll).
     #[arg(long, value_delimiter = ',')]
     pub instants: Vec<f64>,
-    /// Report a truncated file (a killed run) from its complete chunks instead of refusing it.
-    #[arg(long)]
+    /// Report a cut (killed run) or corrupt file from its intact ticks, up to the first bad chunk,
+    /// instead of refusing it.
+    #[arg(long, visible_alias = "allow-damaged")]
     pub allow_truncated: bool,
 }
 
@@ -32,8 +33,8 @@ pub struct CompareArgs {
     /// Folder for compare.md and the overlaid figures.
     #[arg(long, default_value = "runs/compare")]
     pub out: PathBuf,
-    /// Use a truncated file's complete chunks instead of refusing it.
-    #[arg(long)]
+    /// Use a cut or corrupt file's intact ticks, up to the first bad chunk, instead of refusing it.
+    #[arg(long, visible_alias = "allow-damaged")]
     pub allow_truncated: bool,
 }
 
@@ -74,19 +75,20 @@ pub struct ReplayArgs {
     /// Also write the comparison as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Replay a truncated file (a killed run) up to its last complete chunk instead of refusing it.
-    #[arg(long)]
+    /// Replay a cut (killed run) or corrupt file up to its first bad chunk instead of refusing it.
+    #[arg(long, visible_alias = "allow-damaged")]
     pub allow_truncated: bool,
 }
 
-/// Opens a recording for a command: a truncated file is an error unless `allow_truncated`.
+/// Opens a recording for a command: a cut or corrupt file is an error unless `allow_truncated`.
 pub fn open_for(path: &Path, allow_truncated: bool) -> anyhow::Result<Recording> {
     let rec = Recording::open(path)?;
-    if let Some(e) = rec.truncation_error() {
+    if let Some(e) = rec.damage_error() {
         if !allow_truncated {
-            return Err(anyhow::Error::new(e).context("pass --allow-truncated to use its complete chunks"));
+            let flag = if matches!(e, crate::read::ReadError::Cut { .. }) { "--allow-truncated" } else { "--allow-damaged" };
+            return Err(anyhow::Error::new(e).context(format!("pass {flag} to use the intact ticks before the damage")));
         }
-        tracing::warn!("{e}; using its complete chunks");
+        tracing::warn!("{e}; using the intact ticks before it");
     }
     Ok(rec)
 }
@@ -111,8 +113,8 @@ pub fn default_report_dir(file: &Path) -> PathBuf {
 }
 
 /// The report's numbers of a recording, for `rig run` to print at its end (with
-/// [`report::format_text`]). A truncated file is read up to its last complete chunk; the numbers'
-/// `truncated` field says so.
+/// [`report::format_text`]). A cut or corrupt file is read up to its first bad chunk; the numbers'
+/// `integrity` field says so.
 pub fn summary_numbers(path: &Path) -> anyhow::Result<ReportNumbers> {
     let rec = Recording::open(path)?;
     Ok(report::numbers(&rec))

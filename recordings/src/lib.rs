@@ -5,7 +5,8 @@
 //! records as ROS 2 messages (CDR, `ros2msg` schemas embedded) into zstd-compressed MCAP chunks.
 //! Channels and their fields are listed in `recordings/README.md` and in [`schema`].
 //!
-//! - [`read::Recording`] reads a file back (also a truncated one, up to its last complete chunk).
+//! - [`read::Recording`] reads a file back, checking every chunk's CRC (a cut or corrupt file up to
+//!   its first bad chunk, saying where and why).
 //! - [`report`] turns a recording into numbers and figures.
 //! - [`replay`] drives a controller open-loop from a recording and compares its torques.
 //! - [`cli`] holds the `rig replay` / `rig report` subcommands the `rig` binary wires in.

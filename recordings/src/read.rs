@@ -1,20 +1,29 @@
 //! Reading a recording back into columns, one `Vec` per channel.
 //!
-//! [`Recording::open`] reads the file linearly (no index needed), so a file whose writer was
-//! killed still gives every complete chunk; [`Recording::truncated`] then says where it ended.
-//! [`Recording::open_complete`] refuses such a file.
+//! [`Recording::open`] walks the file record by record (no index needed). Every chunk is
+//! decompressed whole and its CRC checked before any of its records is decoded, so nothing of a
+//! chunk that is incomplete or fails its CRC is ever used: reading stops at the first bad chunk
+//! and [`Recording::integrity`] says where and why. It tells apart a file cut short (a killed
+//! run), a complete file damaged in the middle, and a recording the plant ended early on purpose
+//! (disk full, write error). [`Recording::open_complete`] refuses the first two.
 
 pub use crate::schema::{EventRow, StripRow, TimingRow, TorqueRow};
 use crate::schema::{self, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::EventKind;
-use mcap::records::Record;
+use mcap::records::{op, MessageHeader, Record};
 use messages::{ControllerDiagnostics, JointState, Wrench};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 /// The 8 magic bytes every MCAP file starts (and a complete one ends) with.
 pub const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+
+/// Opcode and length in front of every MCAP record, bytes.
+const RECORD_HEAD: usize = 1 + 8;
+
+/// A complete file ends with a footer record (20 bytes of body) and the magic.
+const FOOTER_TAIL: usize = RECORD_HEAD + 20 + MCAP_MAGIC.len();
 
 #[derive(Debug, Error)]
 pub enum ReadError {
@@ -22,14 +31,89 @@ pub enum ReadError {
     Io { path: PathBuf, source: std::io::Error },
     #[error("{path} is not an MCAP recording (it starts with {start:02x?}, an MCAP file starts with {MCAP_MAGIC:02x?})")]
     NotMcap { path: PathBuf, start: Vec<u8> },
-    #[error("{path} is truncated: it ends without its summary and footer after {ticks} complete ticks (the recording process was probably killed): {reason}")]
-    Truncated { path: PathBuf, ticks: usize, reason: String },
+    #[error("{path} is truncated (cut short, no footer: the recording process was probably killed) after {ticks} intact ticks: {damage}")]
+    Cut { path: PathBuf, ticks: usize, damage: Damage },
+    #[error("{path} is corrupt (damaged after it was written) after {ticks} intact ticks: {damage}")]
+    Corrupt { path: PathBuf, ticks: usize, damage: Damage },
     #[error("{path} is an MCAP file but not a rig recording: it has no {topic} channel with schema {schema}")]
     Foreign { path: PathBuf, topic: &'static str, schema: &'static str },
     #[error("{path}: channel {topic} has schema {found}, this reader knows {expected:?} (ros2msg/cdr) with other fields; the file was written by another version")]
     SchemaMismatch { path: PathBuf, topic: String, found: String, expected: &'static str },
+    #[error("{path}: in a chunk that passed its CRC, {what}; the file was written by another writer or version")]
+    Format { path: PathBuf, what: String },
     #[error("{path}: message {sequence} on {topic} does not decode: {source}")]
     Decode { path: PathBuf, topic: String, sequence: u32, source: crate::cdr::CdrError },
+}
+
+/// Where and why reading stopped early.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Damage {
+    /// The chunk (counting from 0 in file order) where reading stopped, if it stopped at one.
+    pub chunk: Option<usize>,
+    /// Byte offset of the record where reading stopped.
+    pub offset: u64,
+    /// The first tick not read (every tick before it was read intact); None if no tick is lost.
+    pub first_tick_lost: Option<u64>,
+    pub reason: String,
+}
+
+impl std::fmt::Display for Damage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.chunk {
+            Some(c) => write!(f, "chunk {c} at byte {}: {}", self.offset, self.reason)?,
+            None => write!(f, "at byte {}: {}", self.offset, self.reason)?,
+        }
+        match self.first_tick_lost {
+            Some(t) => write!(f, "; reading stopped there, the first tick lost is {t}"),
+            None => write!(f, "; every tick before it is intact"),
+        }
+    }
+}
+
+/// How a recording ends, as the reader found it.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum Integrity {
+    /// Footer and end magic present, every chunk decompressed and passed its CRC.
+    #[default]
+    Complete,
+    /// Complete and intact, but the plant ended the recording before the run ended (disk full,
+    /// write error): the writer's reason, as its `recording_summary` metadata says.
+    StoppedEarly(String),
+    /// No footer: the file ends early, as a killed run leaves it.
+    Cut(Damage),
+    /// A chunk fails its CRC or does not decompress, or a record is damaged, in a file that is
+    /// complete (or, cut as well, where the damage comes before the cut).
+    Corrupt(Damage),
+}
+
+impl Integrity {
+    /// Short name for tables and report.json: complete, stopped_early, cut or corrupt.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Integrity::Complete => "complete",
+            Integrity::StoppedEarly(_) => "stopped_early",
+            Integrity::Cut(_) => "cut",
+            Integrity::Corrupt(_) => "corrupt",
+        }
+    }
+
+    /// Where and why reading stopped, for a cut or corrupt file.
+    pub fn damage(&self) -> Option<&Damage> {
+        match self {
+            Integrity::Cut(d) | Integrity::Corrupt(d) => Some(d),
+            _ => None,
+        }
+    }
+
+    /// One sentence on how the file ends (None for a complete file).
+    pub fn describe(&self) -> Option<String> {
+        match self {
+            Integrity::Complete => None,
+            Integrity::StoppedEarly(why) => Some(format!("the plant stopped the recording early: {why}")),
+            Integrity::Cut(d) => Some(format!("cut short (no footer: the recording process was probably killed): {d}")),
+            Integrity::Corrupt(d) => Some(format!("corrupt (damaged after it was written): {d}")),
+        }
+    }
 }
 
 /// A recording read into columns. Each tick channel holds one row per recorded tick, in order.
@@ -37,7 +121,7 @@ pub enum ReadError {
 pub struct Recording {
     pub path: PathBuf,
     /// MCAP metadata records by name: `rig` (written at start: rig, mode, scenario, ...),
-    /// `recording_summary` (written by `finish`: counters; absent in a truncated file).
+    /// `recording_summary` (written by `finish`: counters; absent in a cut file).
     pub metadata: BTreeMap<String, BTreeMap<String, String>>,
     pub joint_state: Vec<JointState>,
     pub joint_torque: Vec<TorqueRow>,
@@ -51,12 +135,29 @@ pub struct Recording {
     pub log_time_ns: Vec<u64>,
     /// z of the centre-line nodes as the first `/strip` message carrying them has it, m.
     pub strip_centreline_z_m: Vec<f32>,
-    /// Set if the file ends without summary and footer: why reading stopped.
-    pub truncated: Option<String>,
+    /// How the file ends: complete, stopped early by the plant, cut short or corrupt.
+    pub integrity: Integrity,
+}
+
+/// A schema record as read: name, encoding, text.
+type SchemaRec = (String, String, Vec<u8>);
+
+/// Schemas and channels seen so far; channel id -> index into [`CHANNELS`] (None: not ours).
+#[derive(Default)]
+struct Links {
+    schemas: HashMap<u16, SchemaRec>,
+    channels: HashMap<u16, Option<usize>>,
+}
+
+/// Why the record walk stopped: the bytes ran out (a cut) or a whole record is bad.
+enum Stop {
+    Short(String),
+    Bad(String),
 }
 
 impl Recording {
-    /// Reads a recording; a truncated file yields its complete chunks and sets `truncated`.
+    /// Reads a recording; a cut or corrupt file yields the ticks before the damage and says where
+    /// in `integrity`.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, ReadError> {
         let path = path.as_ref();
         let io = |source| ReadError::Io { path: path.into(), source };
@@ -68,22 +169,24 @@ impl Recording {
         Self::from_bytes(path, map.bytes())
     }
 
-    /// Like [`open`](Self::open) but a truncated file is an error.
+    /// Like [`open`](Self::open) but a cut or corrupt file is an error (one the plant stopped
+    /// early is complete and intact, so it is not).
     pub fn open_complete(path: impl AsRef<Path>) -> Result<Self, ReadError> {
         let rec = Self::open(path)?;
-        match rec.truncated {
-            Some(reason) => Err(ReadError::Truncated { path: rec.path, ticks: rec.joint_state.len(), reason }),
+        match rec.damage_error() {
+            Some(e) => Err(e),
             None => Ok(rec),
         }
     }
 
     /// The error [`open_complete`](Self::open_complete) would give, for a lenient reader.
-    pub fn truncation_error(&self) -> Option<ReadError> {
-        self.truncated.as_ref().map(|reason| ReadError::Truncated {
-            path: self.path.clone(),
-            ticks: self.joint_state.len(),
-            reason: reason.clone(),
-        })
+    pub fn damage_error(&self) -> Option<ReadError> {
+        let (path, ticks) = (self.path.clone(), self.joint_state.len());
+        match &self.integrity {
+            Integrity::Cut(d) => Some(ReadError::Cut { path, ticks, damage: d.clone() }),
+            Integrity::Corrupt(d) => Some(ReadError::Corrupt { path, ticks, damage: d.clone() }),
+            _ => None,
+        }
     }
 
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Self, ReadError> {
@@ -91,64 +194,139 @@ impl Recording {
             return Err(ReadError::NotMcap { path: path.into(), start: bytes[..bytes.len().min(8)].to_vec() });
         }
         let mut rec = Recording { path: path.into(), ..Default::default() };
+        let mut links = Links::default();
+        let mut at = MCAP_MAGIC.len();
+        let mut chunk = 0usize;
+        let mut in_chunk;
         let mut saw_data_end = false;
-        for r in mcap::read::LinearReader::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())
-            .expect("magic checked")
-        {
-            match r {
-                Ok(Record::Metadata(m)) => {
-                    rec.metadata.insert(m.name, m.metadata);
-                }
-                Ok(Record::DataEnd(_)) => saw_data_end = true,
-                Ok(_) => {}
-                Err(_) => break, // the message pass below reports it
-            }
-        }
-        let mut checked = [false; CHANNELS.len()];
-        let opts = mcap::read::Options::ValidateChunkCrcs.into();
-        for m in mcap::read::MessageStream::new_with_options(bytes, opts).expect("magic checked") {
-            let m = match m {
-                Ok(m) => m,
-                Err(e) => {
-                    rec.truncated = Some(if saw_data_end {
-                        format!("the end of the file is damaged: {e}")
-                    } else {
-                        format!("no data-end record; reading stopped at: {e}")
-                    });
-                    break;
-                }
+        let stop = loop {
+            in_chunk = (bytes.get(at) == Some(&op::CHUNK)).then_some(chunk);
+            let (opcode, body, next) = match record_at(bytes, at) {
+                Ok(Some(r)) => r,
+                Ok(None) => break Some(Stop::Short("the file ends there, without a data-end record".into())),
+                Err(why) => break Some(Stop::Short(why)),
             };
-            let topic = m.channel.topic.as_str();
-            let Some(ch) = CHANNELS.iter().position(|c| c.topic == topic) else { continue };
-            if !checked[ch] {
-                check_schema(path, &m.channel, ch)?;
-                checked[ch] = true;
-            }
-            let data: &[u8] = &m.data;
-            let bad = |source| ReadError::Decode { path: path.into(), topic: topic.into(), sequence: m.sequence, source };
-            match ch {
-                0 => {
-                    rec.joint_state.push(schema::decode_joint_state(data).map_err(bad)?);
-                    rec.log_time_ns.push(m.log_time);
-                }
-                1 => rec.joint_torque.push(schema::decode_joint_torque(data).map_err(bad)?),
-                2 => rec.wrench.push(schema::decode_wrench(data).map_err(bad)?),
-                3 => {
-                    let (row, z) = schema::decode_strip(data, rec.strip_centreline_z_m.is_empty()).map_err(bad)?;
-                    if let Some(z) = z {
-                        rec.strip_centreline_z_m = z;
+            match opcode {
+                op::CHUNK => {
+                    match verified_chunk(body) {
+                        Ok(records) => rec.read_records(path, &records, &mut links)?,
+                        Err(why) => break Some(Stop::Bad(why)),
                     }
-                    rec.strip.push(row);
+                    chunk += 1;
                 }
-                4 => rec.controller.push(schema::decode_controller(data).map_err(bad)?),
-                5 => rec.timing.push(schema::decode_timing(data).map_err(bad)?),
-                _ => rec.events.push(schema::decode_event(data, m.publish_time).map_err(bad)?),
+                op::DATA_END => {
+                    saw_data_end = true;
+                    let saved = body.get(..4).map_or(0, |b| u32::from_le_bytes(b.try_into().unwrap()));
+                    let computed = crc32fast::hash(&bytes[..at]);
+                    if saved != 0 && saved != computed {
+                        break Some(Stop::Bad(format!(
+                            "the data section fails its CRC (stored {saved:08x}, computed {computed:08x}): a record outside the chunks is damaged, every chunk passed its CRC"
+                        )));
+                    }
+                    break None;
+                }
+                op::FOOTER => break Some(Stop::Bad("a footer comes before the data-end record".into())),
+                op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
+                    if let Err(why) = rec.read_record(path, opcode, body, &mut links)? {
+                        break Some(Stop::Bad(why));
+                    }
+                }
+                _ => {}
             }
-        }
-        if !rec.metadata.contains_key("rig") && rec.joint_state.is_empty() && rec.truncated.is_none() {
+            at = next;
+        };
+        let complete = bytes.len() >= MCAP_MAGIC.len() + FOOTER_TAIL
+            && bytes.ends_with(MCAP_MAGIC)
+            && bytes[bytes.len() - FOOTER_TAIL] == op::FOOTER
+            && bytes[bytes.len() - FOOTER_TAIL + 1..][..8] == 20u64.to_le_bytes();
+        let first_tick_lost = (!saw_data_end).then(|| rec.joint_state.last().map_or(0, |s| s.tick + 1));
+        let damage = |reason: String| Damage { chunk: in_chunk, offset: at as u64, first_tick_lost, reason };
+        rec.integrity = match stop {
+            Some(Stop::Short(why)) if !complete => Integrity::Cut(damage(why)),
+            Some(Stop::Short(why)) => Integrity::Corrupt(damage(format!("{why}, yet the file ends with a footer"))),
+            Some(Stop::Bad(why)) if !complete => Integrity::Corrupt(damage(format!("{why} (the file has no footer either)"))),
+            Some(Stop::Bad(why)) => Integrity::Corrupt(damage(why)),
+            None if !complete => Integrity::Cut(Damage {
+                chunk: None,
+                offset: at as u64,
+                first_tick_lost: None,
+                reason: "the summary or footer after the data-end record is missing or cut".into(),
+            }),
+            None => match rec.summary_metadata("stopped_early").filter(|s| !s.is_empty()) {
+                Some(why) => Integrity::StoppedEarly(why.to_string()),
+                None => Integrity::Complete,
+            },
+        };
+        if !rec.metadata.contains_key("rig") && rec.joint_state.is_empty() && rec.integrity == Integrity::Complete {
             return Err(ReadError::Foreign { path: path.into(), topic: CHANNELS[0].topic, schema: CHANNELS[0].schema_name });
         }
         Ok(rec)
+    }
+
+    /// Reads the records of a verified chunk.
+    fn read_records(&mut self, path: &Path, records: &[u8], links: &mut Links) -> Result<(), ReadError> {
+        let mut at = 0;
+        while let Ok(Some((opcode, body, next))) = record_at(records, at) {
+            if let Err(what) = self.read_record(path, opcode, body, links)? {
+                // the chunk passed its CRC, so its writer wrote this: not damage but another format
+                return Err(ReadError::Format { path: path.into(), what });
+            }
+            at = next;
+        }
+        Ok(())
+    }
+
+    /// One schema, channel, message or metadata record. Err(why) (inner) if it does not parse.
+    fn read_record(&mut self, path: &Path, opcode: u8, body: &[u8], links: &mut Links) -> Result<Result<(), String>, ReadError> {
+        let record = match mcap::parse_record(opcode, body) {
+            Ok(r) => r,
+            Err(e) => return Ok(Err(format!("a record (opcode {opcode:#04x}) does not parse: {e}"))),
+        };
+        match record {
+            Record::Schema { header, data } => {
+                links.schemas.insert(header.id, (header.name, header.encoding, data.into_owned()));
+            }
+            Record::Channel(ch) => {
+                let ours = CHANNELS.iter().position(|c| c.topic == ch.topic);
+                if let Some(idx) = ours {
+                    check_schema(path, &ch, links.schemas.get(&ch.schema_id), idx)?;
+                }
+                links.channels.insert(ch.id, ours);
+            }
+            Record::Message { header, data } => match links.channels.get(&header.channel_id) {
+                Some(Some(ch)) => self.push_message(path, *ch, &header, &data)?,
+                Some(None) => {}
+                None => return Ok(Err(format!("message {} is on channel {}, which was never defined", header.sequence, header.channel_id))),
+            },
+            Record::Metadata(m) => {
+                self.metadata.insert(m.name, m.metadata);
+            }
+            _ => {}
+        }
+        Ok(Ok(()))
+    }
+
+    fn push_message(&mut self, path: &Path, ch: usize, m: &MessageHeader, data: &[u8]) -> Result<(), ReadError> {
+        let bad = |source| ReadError::Decode { path: path.into(), topic: CHANNELS[ch].topic.into(), sequence: m.sequence, source };
+        match ch {
+            0 => {
+                self.joint_state.push(schema::decode_joint_state(data).map_err(bad)?);
+                self.log_time_ns.push(m.log_time);
+            }
+            1 => self.joint_torque.push(schema::decode_joint_torque(data).map_err(bad)?),
+            2 => self.wrench.push(schema::decode_wrench(data).map_err(bad)?),
+            3 => {
+                let (row, z) = schema::decode_strip(data, self.strip_centreline_z_m.is_empty()).map_err(bad)?;
+                if let Some(z) = z {
+                    self.strip_centreline_z_m = z;
+                }
+                self.strip.push(row);
+            }
+            4 => self.controller.push(schema::decode_controller(data).map_err(bad)?),
+            5 => self.timing.push(schema::decode_timing(data).map_err(bad)?),
+            _ => self.events.push(schema::decode_event(data, m.publish_time).map_err(bad)?),
+        }
+        Ok(())
     }
 
     /// A value of the `rig` metadata written at the start (rig, mode, scenario, ...).
@@ -234,11 +412,11 @@ impl Recording {
     }
 }
 
-fn check_schema(path: &Path, ch: &mcap::Channel, idx: usize) -> Result<(), ReadError> {
+fn check_schema(path: &Path, ch: &mcap::records::Channel, schema: Option<&SchemaRec>, idx: usize) -> Result<(), ReadError> {
     let def = &CHANNELS[idx];
-    let (name, encoding, data) = match &ch.schema {
-        Some(s) => (s.name.clone(), s.encoding.clone(), s.data.as_ref()),
-        None => (String::new(), String::new(), &[][..]),
+    let (name, encoding, data) = match schema {
+        Some((n, e, d)) => (n.as_str(), e.as_str(), d.as_slice()),
+        None => ("", "", &[][..]),
     };
     if name != def.schema_name
         || encoding != SCHEMA_ENCODING
@@ -253,6 +431,65 @@ fn check_schema(path: &Path, ch: &mcap::Channel, idx: usize) -> Result<(), ReadE
         });
     }
     Ok(())
+}
+
+/// One MCAP record in a byte slice: opcode, body, and where the next record starts.
+type RawRecord<'a> = (u8, &'a [u8], usize);
+
+/// The record at byte `at`; None at the very end; Err(why) if the record does not fit in `bytes`.
+fn record_at(bytes: &[u8], at: usize) -> Result<Option<RawRecord<'_>>, String> {
+    let rest = &bytes[at..];
+    if rest.is_empty() {
+        return Ok(None);
+    }
+    if rest.len() < RECORD_HEAD {
+        return Err(format!("the file ends inside a record header ({} of {RECORD_HEAD} bytes)", rest.len()));
+    }
+    let len = u64::from_le_bytes(rest[1..RECORD_HEAD].try_into().unwrap());
+    let have = (rest.len() - RECORD_HEAD) as u64;
+    if len > have {
+        return Err(format!("a record (opcode {:#04x}) of {len} bytes is incomplete: {have} bytes follow", rest[0]));
+    }
+    let end = RECORD_HEAD + len as usize;
+    Ok(Some((rest[0], &rest[RECORD_HEAD..end], at + end)))
+}
+
+/// Decompresses a chunk whole, checks its size and CRC and that its records fill it exactly;
+/// Err(why) if any of that fails. Only a chunk that passes is decoded at all.
+fn verified_chunk(body: &[u8]) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let Ok(Record::Chunk { header, data }) = mcap::parse_record(op::CHUNK, body) else {
+        return Err("its header does not parse".into());
+    };
+    let size = header.uncompressed_size;
+    let mut records = Vec::with_capacity(size.min(64 << 20) as usize);
+    match header.compression.as_str() {
+        "zstd" => {
+            let mut dec = zstd::stream::read::Decoder::with_buffer(&data[..]).map_err(|e| format!("it does not decompress (zstd: {e})"))?;
+            // at most one byte more than the header promises: a damaged stream cannot balloon
+            dec.by_ref().take(size.saturating_add(1)).read_to_end(&mut records).map_err(|e| format!("it does not decompress (zstd: {e})"))?;
+        }
+        "" => records.extend_from_slice(&data),
+        other => return Err(format!("it uses compression {other:?}, which this reader does not know")),
+    }
+    if records.len() as u64 != size {
+        return Err(format!("it decompresses to {} bytes, its header says {size}", records.len()));
+    }
+    if header.uncompressed_crc == 0 {
+        return Err("it carries no CRC (this project's writer always writes one)".into());
+    }
+    let computed = crc32fast::hash(&records);
+    if computed != header.uncompressed_crc {
+        return Err(format!("it fails its CRC (stored {:08x}, computed {computed:08x})", header.uncompressed_crc));
+    }
+    let mut at = 0;
+    while at < records.len() {
+        match record_at(&records, at) {
+            Ok(Some((_, _, next))) => at = next,
+            _ => return Err(format!("its records do not fill it (a record at byte {at} of {size} overruns it)")),
+        }
+    }
+    Ok(records)
 }
 
 /// A read-only memory map of a whole file (long recordings are not copied into memory).

@@ -83,8 +83,14 @@ pub struct EventLine {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ReportNumbers {
     pub file: String,
-    /// Why the file ends early (killed run), if it does.
-    pub truncated: Option<String>,
+    /// How the file ends: `complete`, `stopped_early` (the plant ended the recording on purpose:
+    /// disk full, write error), `cut` (no footer: a killed run) or `corrupt` (a chunk fails its
+    /// CRC or does not decompress); the numbers cover the intact ticks before any damage.
+    pub integrity: &'static str,
+    /// Why and, for a cut or corrupt file, where (chunk, byte offset, first tick lost).
+    pub integrity_detail: Option<String>,
+    /// The same where and why as fields, for a cut or corrupt file.
+    pub damage: Option<crate::read::Damage>,
     pub ticks: usize,
     pub first_tick: u64,
     pub last_tick: u64,
@@ -166,7 +172,9 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
     let plant = rec.timing.iter().map(|t| t.timing.plant_compute_ns as f64 * 1e-3).collect();
     ReportNumbers {
         file: rec.path.display().to_string(),
-        truncated: rec.truncated.clone(),
+        integrity: rec.integrity.kind(),
+        integrity_detail: rec.integrity.describe(),
+        damage: rec.integrity.damage().cloned(),
         ticks,
         first_tick: rec.joint_state.first().map_or(0, |s| s.tick),
         last_tick: rec.joint_state.last().map_or(0, |s| s.tick),
@@ -248,8 +256,8 @@ pub fn format_text(n: &ReportNumbers) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let _ = writeln!(s, "recording   {}", n.file);
-    if let Some(t) = &n.truncated {
-        let _ = writeln!(s, "WARNING     truncated file (killed run?): {t}");
+    if let Some(t) = &n.integrity_detail {
+        let _ = writeln!(s, "WARNING     {t}");
     }
     let _ = writeln!(
         s,

@@ -6,13 +6,19 @@
 //! so a SIGKILL loses at most that much; chunks are built in memory, so the file never holds a
 //! half-written chunk except when the process dies inside one `write`. [`Recorder::finish`]
 //! writes the summary and index. A disk that runs low (below [`RecorderTuning::min_free_bytes`])
-//! ends the recording cleanly with an `/events` entry; a hard write error (ENOSPC, EIO) ends it
-//! where it is. Either way the writer keeps draining the queue, so the loop never notices.
+//! ends the recording cleanly with an `/events` entry. A full disk tells the same story: after
+//! every chunk the writer keeps room for the next chunk and the file's end allocated past the end
+//! of the file ([`RecorderTuning::tail_reserve_bytes`], `fallocate` KEEP_SIZE), so ENOSPC shows
+//! up there, between chunks, and the file is ended in that room with the `/events` entry, the
+//! `recording_summary` metadata and a footer (no summary section). A write that fails anyway
+//! (no reserve on this file system, EFBIG, EIO) cuts the file back to its last complete chunk and
+//! ends it the same way if it can. Either way [`RecordingSummary::stopped_early`] says why and the
+//! writer keeps draining the queue, so the loop never notices.
 
 use crate::schema::{self, TickHead, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::{sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, MAX_CENTRELINE, RECORDING_FORMAT_VERSION};
 use std::mem::MaybeUninit;
-use mcap::records::{MessageHeader, Metadata};
+use mcap::records::{op, MessageHeader, Metadata};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -62,6 +68,10 @@ pub struct RecorderTuning {
     pub compression_level: u32,
     /// Writer sleep when the queue is empty.
     pub idle_sleep: Duration,
+    /// Bytes kept allocated past the end of the file after every chunk: room for the next chunk
+    /// and for ending the file. None: twice the chunk size plus 64 KiB; 0: none (a full disk is
+    /// then met by a failing write in the middle of a chunk).
+    pub tail_reserve_bytes: Option<u64>,
 }
 
 impl Default for RecorderTuning {
@@ -71,6 +81,7 @@ impl Default for RecorderTuning {
             max_flush_interval: Duration::from_secs(1),
             compression_level: 0,
             idle_sleep: Duration::from_millis(2),
+            tail_reserve_bytes: None,
         }
     }
 }
@@ -96,11 +107,13 @@ pub struct RecordingSummary {
     /// Records the queue refused because it was full (must be 0).
     pub dropped_ticks: u64,
     pub dropped_events: u64,
-    /// Records drained but not written because the recording had stopped (disk full, I/O error).
+    /// Records not in the file because the recording had stopped (disk full, I/O error): those
+    /// drained afterwards and those of the chunk the error cut off.
     pub lost_after_stop: u64,
     /// Why the recording stopped before `finish`, if it did.
     pub stopped_early: Option<String>,
-    /// Whether the file got its summary, index and footer.
+    /// Whether the file got its footer: with summary and index normally, or (after a write error)
+    /// cut back to its last complete chunk and ended there.
     pub finalised: bool,
     /// File size, bytes.
     pub bytes: u64,
@@ -148,12 +161,26 @@ const WRITE_SLICE_BYTES: usize = 16 * 1024;
 /// without preemption (`PREEMPT_NONE`, common on cloud VMs) runs a syscall to its end before a
 /// woken SCHED_FIFO thread on that CPU gets it: one chunk of a few hundred kB copied into the
 /// page cache in one `write` held the controller off its CPU for long enough to miss ticks. Each
-/// return to user space between slices lets a waiting real-time thread in.
-struct SlicedFile(File);
+/// return to user space between slices lets a waiting real-time thread in. It also keeps a
+/// [`Tally`] of what went to the file, so the writer knows where its last complete chunk ends.
+struct SlicedFile(File, Arc<Tally>);
+
+/// Bytes written so far and their CRC-32 (the data section's, as long as it lasts): what ending
+/// the file after a write error needs. Only the writer thread touches it.
+#[derive(Default)]
+struct Tally {
+    position: AtomicU64,
+    crc: std::sync::Mutex<crc32fast::Hasher>,
+    /// Set by a seek that moved: the running CRC no longer is the file's.
+    seeked: AtomicBool,
+}
 
 impl std::io::Write for SlicedFile {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.0.write(&buf[..buf.len().min(WRITE_SLICE_BYTES)])
+        let n = self.0.write(&buf[..buf.len().min(WRITE_SLICE_BYTES)])?;
+        self.1.position.fetch_add(n as u64, Ordering::Relaxed);
+        self.1.crc.lock().unwrap_or_else(|e| e.into_inner()).update(&buf[..n]);
+        Ok(n)
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
@@ -162,8 +189,14 @@ impl std::io::Write for SlicedFile {
 }
 
 impl std::io::Seek for SlicedFile {
+    /// The writer runs with seeking disabled (it only asks where it is); a real seek would make
+    /// the running CRC meaningless, and the end after a write error then carries none.
     fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
-        self.0.seek(pos)
+        let at = self.0.seek(pos)?;
+        if self.1.position.swap(at, Ordering::Relaxed) != at {
+            self.1.seeked.store(true, Ordering::Relaxed);
+        }
+        Ok(at)
     }
 }
 
@@ -191,6 +224,8 @@ impl Recorder {
             std::fs::create_dir_all(dir).map_err(|source| RecorderError::Create { path: path.clone(), source })?;
         }
         let file = File::create(&path).map_err(|source| RecorderError::Create { path: path.clone(), source })?;
+        let fd = std::os::fd::AsRawFd::as_raw_fd(&file);
+        let tally = Arc::new(Tally::default());
         let mcap_err = |e: mcap::McapError| RecorderError::Mcap { path: path.clone(), what: error_chain(&e) };
         let mut mcap = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
@@ -201,7 +236,7 @@ impl Recorder {
             .chunk_size(None)
             .disable_seeking(true)
             .library(format!("rig-recordings {}", env!("CARGO_PKG_VERSION")))
-            .create(BufWriter::with_capacity(WRITE_SLICE_BYTES, SlicedFile(file)))
+            .create(BufWriter::with_capacity(WRITE_SLICE_BYTES, SlicedFile(file, tally.clone())))
             .map_err(mcap_err)?;
         let mut channel_ids = [0u16; CHANNELS.len()];
         for (id, ch) in channel_ids.iter_mut().zip(CHANNELS.iter()) {
@@ -228,6 +263,7 @@ impl Recorder {
         }
         while consumer.pop().is_ok() {}
         let shared = Arc::new(Shared::default());
+        let reserve = tuning.tail_reserve_bytes.unwrap_or(2 * cfg.chunk_size_bytes + (64 << 10));
         let mut writer = WriterThread {
             mcap: Some(mcap),
             channel_ids,
@@ -248,6 +284,10 @@ impl Recorder {
             last_sim_time_s: 0.0,
             stopped_early: None,
             finalised: false,
+            fd,
+            tally,
+            kept: Kept::default(),
+            reserve,
         };
         let thread = std::thread::Builder::new()
             .name("recorder".into())
@@ -382,10 +422,32 @@ struct WriterThread {
     last_sim_time_s: f64,
     stopped_early: Option<String>,
     finalised: bool,
+    /// The file's descriptor (owned by `mcap`), for the tail reserve.
+    fd: std::os::fd::RawFd,
+    /// What went to the file so far (kept by [`SlicedFile`]).
+    tally: Arc<Tally>,
+    /// What the file holds up to the end of its last complete chunk.
+    kept: Kept,
+    /// Bytes to keep allocated past the end of the file (0: none, or not supported here).
+    reserve: u64,
+}
+
+/// The state at the end of the last complete chunk: what a write error falls back to.
+#[derive(Default, Clone)]
+struct Kept {
+    bytes: u64,
+    /// CRC-32 of those bytes so far, to be finished over the end appended after a write error
+    /// (None if the writer ever seeked).
+    crc: Option<crc32fast::Hasher>,
+    ticks: u64,
+    events: u64,
+    last_tick: u64,
+    last_sim_time_s: f64,
 }
 
 impl WriterThread {
     fn run(&mut self) -> RecordingSummary {
+        self.chunk_complete();
         loop {
             if let Some(item) = self.pop() {
                 self.handle(item);
@@ -449,7 +511,7 @@ impl WriterThread {
             Popped::Event(e) => self.write_event(e),
         };
         if let Err(e) = res {
-            self.fail(format!("write failed: {}", error_chain(&e)));
+            self.fail(&e);
         }
     }
 
@@ -507,7 +569,10 @@ impl WriterThread {
             return;
         }
         if let Err(e) = mcap.flush() {
-            self.fail(format!("write failed: {}", error_chain(&e)));
+            self.fail(&e);
+            return;
+        }
+        if !self.chunk_complete() {
             return;
         }
         self.bytes_since_flush = 0;
@@ -522,7 +587,7 @@ impl WriterThread {
                 );
                 let e = EventRecord::new(self.last_tick, self.last_sim_time_s, EventKind::RecordingError, &why);
                 if let Err(err) = self.write_event(&e) {
-                    self.fail(format!("{why}; and writing the event failed: {}", error_chain(&err)));
+                    self.fail(&err);
                     return;
                 }
                 tracing::error!(path = %self.path.display(), "{why}; the loop keeps running");
@@ -533,54 +598,206 @@ impl WriterThread {
         }
     }
 
-    /// A hard write error: stop where we are (the file keeps its complete chunks).
-    fn fail(&mut self, why: String) {
-        tracing::error!(
-            path = %self.path.display(),
-            "recording stopped at tick {}: {why}; the file keeps its complete chunks; the loop keeps running",
-            self.last_tick
-        );
-        if let Some(m) = self.mcap.take() {
-            // Not finish(): the summary would go to a failing disk. Drop the stream as is.
-            drop(m.into_inner());
+    /// The chunk just flushed is complete in the file: remember where it ends and what it holds,
+    /// and keep the tail reserve allocated past it. False if there is no room for the reserve:
+    /// then the recording is ended here, in what is left of the previous reserve.
+    fn chunk_complete(&mut self) -> bool {
+        let bytes = self.tally.position.load(Ordering::Relaxed);
+        let crc = (!self.tally.seeked.load(Ordering::Relaxed)).then(|| self.tally.crc.lock().unwrap_or_else(|e| e.into_inner()).clone());
+        self.kept = Kept {
+            bytes,
+            crc,
+            ticks: self.ticks_written,
+            events: self.events_written,
+            last_tick: self.last_tick,
+            last_sim_time_s: self.last_sim_time_s,
+        };
+        if self.reserve == 0 {
+            return true;
         }
-        self.stopped_early = Some(why);
-        self.shared.stopped.store(true, Ordering::Relaxed);
+        // SAFETY: fd is the open recording, owned by self.mcap for as long as the writer runs.
+        let rc = unsafe { libc::fallocate(self.fd, libc::FALLOC_FL_KEEP_SIZE, bytes as i64, self.reserve as i64) };
+        if rc == 0 {
+            return true;
+        }
+        let err = std::io::Error::last_os_error();
+        match err.raw_os_error() {
+            Some(libc::ENOSPC | libc::EDQUOT) => {
+                let what = format!("no room to keep {} KiB allocated past the end of the file", self.reserve >> 10);
+                self.stop(&err, &what);
+                false
+            }
+            _ => {
+                tracing::warn!(path = %self.path.display(), "cannot keep room past the end of the recording ({err}): a full disk will cut it mid-chunk");
+                self.reserve = 0;
+                true
+            }
+        }
     }
 
-    /// Writes the counters, summary, index and footer. Returns whether the file is finalised.
-    fn finalise(&mut self) -> bool {
-        let Some(mut mcap) = self.mcap.take() else { return false };
+    /// Ends the recording after its last complete chunk because of `err` while doing `what`.
+    fn stop(&mut self, err: &(dyn std::error::Error + 'static), what: &str) {
+        // Not finish(): the summary would go to a failing disk. Take the file back without
+        // flushing what is still buffered.
+        let file = self.mcap.take().map(|m| m.into_inner().into_parts().0 .0);
+        self.stop_on_error(err, what, file);
+    }
+
+    /// A hard write error (ENOSPC, EFBIG, EIO): cut the file back to its last complete chunk and
+    /// end it there (event, summary metadata, footer), the same story as the reserve tells.
+    fn fail(&mut self, err: &mcap::McapError) {
+        self.stop(err, "write failed");
+    }
+
+    fn stop_on_error(&mut self, err: &(dyn std::error::Error + 'static), what: &str, file: Option<File>) {
+        let mut why = format!(
+            "{} at tick {}: {what}: {}; the file keeps the ticks up to {}",
+            os_error_name(err),
+            self.last_tick,
+            error_chain(err),
+            if self.kept.ticks > 0 { self.kept.last_tick.to_string() } else { "none".into() }
+        );
+        if let Some(before) = self.stopped_early.take() {
+            why = format!("{before}; then {why}");
+        }
+        self.stopped_early = Some(why.clone());
+        self.shared.stopped.store(true, Ordering::Relaxed);
+        if let Some(file) = file {
+            self.end_at_kept(file, &why);
+        }
+        tracing::error!(path = %self.path.display(), "recording stopped: {}; the loop keeps running", self.stopped_early.as_deref().unwrap_or(""));
+    }
+
+    /// Truncates the file to its last complete chunk and appends the finale there.
+    fn end_at_kept(&mut self, file: File, why: &str) {
+        use std::os::unix::fs::FileExt;
+        let lost = (self.ticks_written - self.kept.ticks) + (self.events_written - self.kept.events);
+        self.lost_after_stop += lost;
+        self.ticks_written = self.kept.ticks;
+        self.events_written = self.kept.events;
+        let e = EventRecord::new(self.kept.last_tick, self.kept.last_sim_time_s, EventKind::RecordingError, why);
+        self.events_written += 1;
+        let finale = self.finale(&e);
+        let end = self.kept.bytes + finale.len() as u64;
+        // the second set_len gives back what is left of the tail reserve
+        let res = file.set_len(self.kept.bytes).and_then(|_| file.write_all_at(&finale, self.kept.bytes)).and_then(|_| file.set_len(end));
+        match res {
+            Ok(()) => self.finalised = true,
+            Err(err) => {
+                self.events_written -= 1;
+                let _ = file.set_len(self.kept.bytes);
+                tracing::error!(path = %self.path.display(), "ending the recording after its last complete chunk failed: {err}");
+                if let Some(w) = self.stopped_early.as_mut() {
+                    w.push_str(&format!("; no room for the footer ({err}): the file ends after its last complete chunk"));
+                }
+            }
+        }
+    }
+
+    /// The end of a file stopped by a write error, hand-encoded (the mcap writer is broken by
+    /// then): the `/events` entry as a message outside any chunk, the `recording_summary`
+    /// metadata, a data-end record with the data section's CRC (so that these two records are
+    /// checked too) and a footer without summary.
+    fn finale(&mut self, e: &EventRecord) -> Vec<u8> {
+        fn record(out: &mut Vec<u8>, opcode: u8, body: &[u8]) {
+            out.push(opcode);
+            out.extend_from_slice(&(body.len() as u64).to_le_bytes());
+            out.extend_from_slice(body);
+        }
+        fn string(out: &mut Vec<u8>, s: &str) {
+            out.extend_from_slice(&(s.len() as u32).to_le_bytes());
+            out.extend_from_slice(s.as_bytes());
+        }
+        schema::encode_event(&mut self.buf, e);
+        let mut out = Vec::new();
+        let mut body = Vec::new();
+        body.extend_from_slice(&self.channel_ids[6].to_le_bytes());
+        body.extend_from_slice(&(e.tick as u32).to_le_bytes());
+        body.extend_from_slice(&sim_time_ns(e.sim_time_s).to_le_bytes());
+        body.extend_from_slice(&e.wall_ns.to_le_bytes());
+        body.extend_from_slice(&self.buf);
+        record(&mut out, op::MESSAGE, &body);
+        let mut entries = Vec::new();
+        for (k, v) in self.summary_metadata() {
+            string(&mut entries, &k);
+            string(&mut entries, &v);
+        }
+        body.clear();
+        string(&mut body, "recording_summary");
+        body.extend_from_slice(&(entries.len() as u32).to_le_bytes());
+        body.extend_from_slice(&entries);
+        record(&mut out, op::METADATA, &body);
+        let crc = self.kept.crc.clone().map_or(0, |mut h| {
+            h.update(&out);
+            h.finalize()
+        });
+        record(&mut out, op::DATA_END, &crc.to_le_bytes());
+        record(&mut out, op::FOOTER, &[0u8; 20]);
+        out.extend_from_slice(crate::read::MCAP_MAGIC);
+        out
+    }
+
+    /// The `recording_summary` metadata: counters, last tick, why it stopped early.
+    fn summary_metadata(&self) -> BTreeMap<String, String> {
         let mut meta = BTreeMap::new();
         meta.insert("ticks_written".to_string(), self.ticks_written.to_string());
         meta.insert("events_written".to_string(), self.events_written.to_string());
         meta.insert("dropped_ticks".to_string(), self.shared.dropped_ticks.load(Ordering::Relaxed).to_string());
         meta.insert("dropped_events".to_string(), self.shared.dropped_events.load(Ordering::Relaxed).to_string());
-        meta.insert("last_tick".to_string(), self.last_tick.to_string());
+        meta.insert("last_tick".to_string(), if self.mcap.is_some() { self.last_tick } else { self.kept.last_tick }.to_string());
         meta.insert("stopped_early".to_string(), self.stopped_early.clone().unwrap_or_default());
         meta.insert("finished_wall_ns".to_string(), wall_clock_ns().to_string());
+        meta
+    }
+
+    /// Writes the counters, summary, index and footer. Returns whether the file is finalised.
+    fn finalise(&mut self) -> bool {
+        if self.mcap.is_none() {
+            return false;
+        }
+        let meta = self.summary_metadata();
+        let mut mcap = self.mcap.take().expect("checked");
         let res = mcap
             .write_metadata(&Metadata { name: "recording_summary".into(), metadata: meta })
-            .and_then(|_| mcap.finish().map(|_| ()))
-            .and_then(|_| {
-                use std::io::Write;
-                mcap.into_inner().flush().map_err(mcap::McapError::from)
-            });
-        match res {
+            .and_then(|_| mcap.finish().map(|_| ()));
+        // The disk failed under the summary: end the file after its last complete chunk.
+        let (err, file) = match res {
             Ok(()) => {
-                self.finalised = true;
-                true
-            }
-            Err(e) => {
-                let e = error_chain(&e);
-                tracing::error!(path = %self.path.display(), "finalising the recording failed: {e}");
-                if self.stopped_early.is_none() {
-                    self.stopped_early = Some(format!("finalising failed: {e}"));
+                use std::io::Write;
+                let mut w = mcap.into_inner();
+                match w.flush() {
+                    Ok(()) => {
+                        self.finalised = true;
+                        // give back the tail reserve (a file system keeps it past close)
+                        let _ = w.into_parts().0 .0.set_len(self.tally.position.load(Ordering::Relaxed));
+                        return true;
+                    }
+                    Err(e) => (mcap::McapError::from(e), w.into_parts().0 .0),
                 }
-                false
             }
-        }
+            Err(e) => (e, mcap.into_inner().into_parts().0 .0),
+        };
+        self.stop_on_error(&err, "write failed", Some(file));
+        self.finalised
     }
+}
+
+/// What an I/O error inside `e` is, for the stop reason: "disk full (ENOSPC)", ...
+fn os_error_name(e: &(dyn std::error::Error + 'static)) -> &'static str {
+    let mut cur = Some(e);
+    while let Some(c) = cur {
+        if let Some(code) = c.downcast_ref::<std::io::Error>().and_then(std::io::Error::raw_os_error) {
+            return match code {
+                libc::ENOSPC => "disk full (ENOSPC)",
+                libc::EDQUOT => "disk quota exceeded (EDQUOT)",
+                libc::EFBIG => "file too large (EFBIG)",
+                libc::EIO => "I/O error (EIO)",
+                _ => "write error",
+            };
+        }
+        cur = c.source();
+    }
+    "write error"
 }
 
 /// Free bytes for unprivileged users on the file system holding `path`.

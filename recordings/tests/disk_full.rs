@@ -1,12 +1,14 @@
 //! A really full disk (ENOSPC from a 384 KiB tmpfs) in the middle of a recording: the writer stops
-//! with a reason naming the error, the loop side never blocks, and the file keeps its complete
-//! chunks. The tmpfs lives in a private mount namespace (`unshare`), so the inner test runs in a
+//! with a reason naming the error, the loop side never blocks, and the file is cut back to its
+//! complete chunks and ended there, finalised, with the same story as the 64 MiB reserve. The tmpfs lives in a private mount namespace (`unshare`), so the inner test runs in a
 //! child process: the outer test starts it there and checks that it ran and passed.
 
-use std::path::PathBuf;
+mod common;
+
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use recordings::read::Recording;
+use recordings::read::{Integrity, Recording};
 use recordings::synthetic::SyntheticRun;
 use recordings::{EventKind, Recorder, RecorderConfig, RecorderTuning, RecordingSummary};
 
@@ -72,19 +74,36 @@ fn record(path: &std::path::Path, tuning: RecorderTuning) -> RecordingSummary {
 #[ignore = "started by a_full_disk_mid_run_stops_the_recording_and_keeps_the_complete_chunks"]
 fn inner_full_disk() {
     let dir = PathBuf::from(std::env::var(DIR_ENV).expect("started by the outer test"));
-    // 1. No reserve: the disk really fills, write(2) fails with ENOSPC mid-chunk. The file keeps
-    //    its complete chunks and reads back as truncated.
-    let path = dir.join("full.mcap");
-    let s = record(&path, RecorderTuning { min_free_bytes: 0, ..Default::default() });
-    assert!(!s.finalised);
-    let why = s.stopped_early.clone().unwrap();
-    assert!(why.contains("write failed") && why.to_lowercase().contains("no space left"), "{why}");
-    assert!(s.bytes <= TMPFS_BYTES);
-    let back = Recording::open(&path).unwrap();
-    assert!(back.truncated.is_some());
-    assert!(!back.joint_state.is_empty() && back.joint_state.len() as u64 <= s.ticks_written, "{}", back.joint_state.len());
-    back.check_continuity().unwrap();
-    std::fs::remove_file(&path).unwrap();
+    // 1. No free-space reserve: the disk really fills. With the tail reserve (the default),
+    //    fallocate meets ENOSPC between chunks; without it (0), write(2) fails with ENOSPC in
+    //    the middle of a chunk and the file is cut back to its last complete chunk (the pages
+    //    of the half-written chunk, freed again, hold the end). Either way the file keeps its
+    //    complete chunks, ends with the stop event, summary metadata and a footer, and reads
+    //    back complete, as stopped early, with exactly the ticks the writer says it kept.
+    for (reserve, what) in [(None, "no room to keep 192 KiB allocated past the end of the file"), (Some(0), "write failed")] {
+        let path = dir.join("full.mcap");
+        let s = record(&path, RecorderTuning { min_free_bytes: 0, tail_reserve_bytes: reserve, ..Default::default() });
+        assert!(s.finalised, "{s:?}");
+        let why = s.stopped_early.clone().unwrap();
+        assert!(why.starts_with("disk full (ENOSPC) at tick ") && why.contains(what) && why.contains("No space left on device"), "{why}");
+        assert!(s.lost_after_stop > 0 && s.bytes <= TMPFS_BYTES, "{s:?}");
+        let back = Recording::open_complete(&path).unwrap();
+        assert_eq!(back.integrity, Integrity::StoppedEarly(why.clone()));
+        assert_eq!(back.joint_state.len() as u64, s.ticks_written);
+        assert!(why.contains(&format!("the file keeps the ticks up to {}", back.joint_state.last().unwrap().tick)), "{why}");
+        back.check_continuity().unwrap();
+        let ev: Vec<_> = back.events_of(EventKind::RecordingError).collect();
+        assert_eq!(ev.len(), 1);
+        assert!(why.starts_with(&ev[0].text), "{:?}", ev[0].text);
+        assert_eq!(back.summary_metadata("ticks_written"), Some(s.ticks_written.to_string().as_str()));
+        // The end written after the error carries the data section's CRC (the reader checked it).
+        let bytes = std::fs::read(&path).unwrap();
+        let data_end = &bytes[bytes.len() - 50..bytes.len() - 37];
+        assert_eq!(data_end[0], 0x0f, "data-end record before footer and magic");
+        assert_ne!(data_end[9..13], [0; 4], "a data section CRC, not 0");
+        same_as_python(&path, &back);
+        std::fs::remove_file(&path).unwrap();
+    }
     // 2. The default reserve (64 MiB) on the same small disk: the first chunk close finds too
     //    little space, the writer records why and finalises a complete file.
     let path = dir.join("reserve.mcap");
@@ -95,4 +114,16 @@ fn inner_full_disk() {
     assert_eq!(back.joint_state.len() as u64, s.ticks_written);
     back.check_continuity().unwrap();
     assert_eq!(back.events_of(EventKind::RecordingError).count(), 1);
+    assert_eq!(back.integrity, Integrity::StoppedEarly(s.stopped_early.clone().unwrap()));
+    same_as_python(&path, &back);
+}
+
+/// The official Python reader (every CRC checked) reads the same, and calls it stopped early.
+fn same_as_python(path: &Path, back: &Recording) {
+    if !common::python_ready() {
+        return;
+    }
+    let (py, text) = common::python_read(path);
+    assert!(text.contains("STOPPED EARLY: the plant ended the recording on purpose"), "{text}");
+    common::assert_same_as_python(back, &py);
 }

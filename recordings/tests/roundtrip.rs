@@ -1,7 +1,7 @@
 //! Writer -> file -> reader, without daemons: every tick on every channel, truncated files,
 //! foreign files, a disk running low.
 
-use recordings::read::{ReadError, Recording};
+use recordings::read::{Integrity, ReadError, Recording};
 use recordings::synthetic::SyntheticRun;
 use recordings::{EventKind, Recorder, RecorderConfig, RecorderTuning};
 use std::path::PathBuf;
@@ -27,6 +27,9 @@ fn every_tick_on_every_channel_reads_back_exactly() {
     assert!(summary.finalised, "{summary:?}");
     assert_eq!((summary.ticks_written, summary.events_written, summary.dropped_ticks), (run.ticks, 4, 0));
     assert_eq!(summary.bytes, std::fs::metadata(&path).unwrap().len());
+    // The room kept past the end while writing (twice the chunk size) is given back.
+    let allocated = std::os::unix::fs::MetadataExt::blocks(&std::fs::metadata(&path).unwrap()) * 512;
+    assert!(allocated < summary.bytes + (64 << 10), "{allocated} bytes allocated for {}", summary.bytes);
 
     let rec = Recording::open_complete(&path).unwrap();
     assert_eq!(rec.check_continuity().unwrap(), 0..=run.ticks - 1);
@@ -70,8 +73,9 @@ fn a_cut_file_gives_its_complete_chunks_and_a_clear_error_when_strict() {
         let p = tmp(&format!("cut-{cut}.mcap"));
         std::fs::write(&p, &bytes[..cut]).unwrap();
         let rec = Recording::open(&p).unwrap();
-        let why = rec.truncated.as_deref().unwrap_or_else(|| panic!("cut at {cut} not reported"));
-        assert!(!why.is_empty());
+        let Integrity::Cut(damage) = &rec.integrity else { panic!("cut at {cut} reported as {:?}", rec.integrity) };
+        assert!(damage.offset <= cut as u64 && !damage.reason.is_empty(), "{damage:?}");
+        assert_eq!(damage.first_tick_lost, Some(rec.joint_state.last().map_or(0, |s| s.tick + 1)));
         if !rec.joint_state.is_empty() {
             // A prefix of the run, whole ticks only, identical to the uncut file.
             let range = rec.check_continuity().unwrap();
@@ -82,7 +86,7 @@ fn a_cut_file_gives_its_complete_chunks_and_a_clear_error_when_strict() {
         }
         recovered.push(rec.joint_state.len());
         let err = Recording::open_complete(&p).unwrap_err();
-        assert!(matches!(err, ReadError::Truncated { .. }), "{err}");
+        assert!(matches!(err, ReadError::Cut { .. }), "{err}");
         let msg = err.to_string();
         assert!(msg.contains("truncated") && msg.contains(&p.display().to_string()), "{msg}");
     }
@@ -148,6 +152,7 @@ fn a_disk_running_low_ends_the_recording_cleanly_and_the_loop_never_blocks() {
     assert!(summary.ticks_written > 0 && summary.lost_after_stop > 0, "{summary:?}");
 
     let back = Recording::open_complete(&path).unwrap();
+    assert!(matches!(&back.integrity, Integrity::StoppedEarly(w) if *w == why), "{:?}", back.integrity);
     assert_eq!(back.joint_state.len() as u64, summary.ticks_written);
     back.check_continuity().unwrap();
     let ev: Vec<_> = back.events_of(EventKind::RecordingError).collect();
@@ -178,7 +183,7 @@ fn commands_refuse_a_cut_file_unless_allowed_and_name_the_way_out() {
     assert!(!rec.joint_state.is_empty());
     // `rig run` still gets numbers from a killed run, flagged as truncated.
     let n = recordings::cli::summary_numbers(&cut).unwrap();
-    assert!(n.truncated.is_some() && n.ticks == rec.joint_state.len());
+    assert!(n.integrity == "cut" && n.integrity_detail.is_some() && n.ticks == rec.joint_state.len(), "{n:?}");
     let junk = tmp("cli-junk.mcap");
     std::fs::write(&junk, b"PK\x03\x04 a zip file").unwrap();
     let err = format!("{:#}", recordings::cli::summary_numbers(&junk).unwrap_err());

@@ -1,8 +1,10 @@
-//! A hard write error in the middle of a run (here EFBIG from a file-size limit, standing in for
-//! ENOSPC/EIO): the writer stops with a clear reason, keeps draining so the loop never blocks,
-//! and the file keeps its complete chunks. Own test binary: the limit applies to the process.
+//! A hard write error in the middle of a run (here EFBIG from a file-size limit; disk_full.rs has
+//! a real ENOSPC): the writer stops with a clear reason, keeps draining so the loop never blocks,
+//! and cuts the file back to its last complete chunk. A size limit leaves no room for the footer
+//! (unlike ENOSPC, where disk_full.rs shows the file ended cleanly), so the file ends there and
+//! reads as cut, exactly at the chunk boundary. Own test binary: the limit applies to the process.
 
-use recordings::read::Recording;
+use recordings::read::{Integrity, Recording};
 use recordings::synthetic::SyntheticRun;
 use recordings::{Recorder, RecorderConfig};
 
@@ -38,14 +40,17 @@ fn a_write_error_mid_run_stops_the_recording_and_keeps_the_complete_chunks() {
     assert_eq!(accepted, run.ticks, "the loop side never noticed");
     assert!(stopped, "is_stopped() reports the stop");
     assert_eq!(s.dropped_ticks, 0);
-    assert!(!s.finalised);
+    assert!(!s.finalised, "{s:?}");
     let why = s.stopped_early.clone().unwrap();
-    assert!(why.contains("write failed") && why.to_lowercase().contains("file too large"), "{why}");
+    assert!(why.starts_with("file too large (EFBIG) at tick ") && why.contains("write failed"), "{why}");
+    assert!(why.ends_with("no room for the footer (File too large (os error 27)): the file ends after its last complete chunk"), "{why}");
     assert_eq!(s.ticks_written + s.lost_after_stop, run.ticks, "{s:?}");
     assert!(s.bytes <= limit);
 
     let back = Recording::open(&path).unwrap();
-    assert!(back.truncated.is_some());
-    assert!(!back.joint_state.is_empty() && back.joint_state.len() as u64 <= s.ticks_written, "{}", back.joint_state.len());
+    let Integrity::Cut(d) = &back.integrity else { panic!("{:?}", back.integrity) };
+    assert_eq!((d.offset, d.chunk), (s.bytes, None), "the file ends exactly after a complete record: {d:?}");
+    assert!(!back.joint_state.is_empty() && back.joint_state.len() as u64 == s.ticks_written, "{} {s:?}", back.joint_state.len());
+    assert!(why.contains(&format!("the file keeps the ticks up to {};", back.joint_state.last().unwrap().tick)), "{why}");
     back.check_continuity().unwrap();
 }

@@ -1,0 +1,95 @@
+//! The real plant filling a real disk: `plant-sim` + `controller` in lockstep record onto an
+//! 80 MiB tmpfs in a private mount namespace (`unshare`), and another file takes every free byte
+//! in the middle of the run (the plant held with SIGSTOP meanwhile, so that the disk goes from
+//! roomy to full between two of its chunks). ENOSPC must end the recording the clean way: the
+//! plant runs to its end, its summary JSON says `recording_stopped_early` = "disk full (ENOSPC)
+//! at tick N ...", and the file reads back complete, stopped early for that same reason, with
+//! every tick up to the stop. The inner test runs inside the namespace, started by the outer one.
+
+use recordings::read::{Integrity, Recording};
+use rig_tests::{bin, plant_summary, start_controller, temp_dir, unique_rig, write_scenario, Daemon};
+use std::os::fd::AsRawFd;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+const DIR_ENV: &str = "RIG_TESTS_FULL_DISK_DIR";
+const TMPFS_MIB: u64 = 80;
+
+#[test]
+fn a_disk_filling_up_mid_run_ends_the_recording_cleanly_and_the_plant_says_why() {
+    let dir = std::env::temp_dir().join(format!("rig-tests-enospc-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let me = std::env::current_exe().unwrap();
+    // root may mount directly in a new mount namespace; others need a user namespace too
+    let user_ns = if unsafe { libc::geteuid() } == 0 { "" } else { "--user --map-root-user" };
+    let script = format!(
+        "mount -t tmpfs -o size={TMPFS_MIB}m tmpfs '{d}' || exit 77; exec '{me}' --exact inner_plant_on_a_filling_disk --ignored --nocapture",
+        d = dir.display(),
+        me = me.display()
+    );
+    let out = Command::new("sh")
+        .arg("-c")
+        .arg(format!("unshare --mount {user_ns} sh -c \"{script}\""))
+        .env(DIR_ENV, &dir)
+        .output()
+        .expect("sh");
+    let _ = std::fs::remove_dir_all(&dir);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if out.status.code() == Some(77) || stderr.contains("unshare failed") || stderr.contains("Operation not permitted") {
+        eprintln!("SKIPPED: cannot mount a tmpfs in a private namespace on this machine: {stderr}");
+        return;
+    }
+    assert!(out.status.success(), "inner test failed:\n{stdout}\n{stderr}");
+    assert!(stdout.contains("test inner_plant_on_a_filling_disk ... ok"), "inner test did not run:\n{stdout}\n{stderr}");
+    print!("{}", stdout.lines().filter(|l| l.starts_with("recording_stopped_early")).map(|l| format!("{l}\n")).collect::<String>());
+}
+
+/// Takes every free byte of the file system holding `dir` (tmpfs: fallocate allocates, and an
+/// allocation that does not fit fails whole, so the steps shrink down to a page).
+fn fill(dir: &Path) {
+    let f = std::fs::File::create(dir.join("filler")).unwrap();
+    let mut at = 0i64;
+    for step in [1i64 << 20, 64 << 10, 4 << 10] {
+        while unsafe { libc::fallocate(f.as_raw_fd(), 0, at, step) } == 0 {
+            at += step;
+        }
+    }
+}
+
+#[test]
+#[ignore = "started by a_disk_filling_up_mid_run_ends_the_recording_cleanly_and_the_plant_says_why"]
+fn inner_plant_on_a_filling_disk() {
+    let disk = PathBuf::from(std::env::var(DIR_ENV).expect("started by the outer test"));
+    let rig = unique_rig("enospc");
+    let logs = temp_dir(&rig); // logs and scenario off the full disk: the summary must get out
+    let scenario = write_scenario(&logs, "lockstep", "");
+    let out = disk.join("run.mcap");
+    let args = ["--rig", &rig, "--scenario", scenario.to_str().unwrap(), "--duration", "60", "--out", out.to_str().unwrap()];
+    let mut plant = Daemon::start("plant", &bin("plant-sim"), &args, &logs);
+    let mut ctrl = start_controller("controller", "controller", &rig, &scenario, &logs, &[]);
+    let t0 = Instant::now();
+    while std::fs::metadata(&out).map_or(0, |m| m.len()) < 512 << 10 {
+        assert!(t0.elapsed() < Duration::from_secs(60), "the recording did not grow: {}", plant.stderr());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    plant.signal(libc::SIGSTOP);
+    fill(&disk);
+    plant.signal(libc::SIGCONT);
+    let ps = plant.expect_exit(Duration::from_secs(120));
+    assert!(ps.success(), "plant failed: {}", plant.stderr());
+    assert!(ctrl.expect_exit(Duration::from_secs(10)).success(), "controller failed: {}", ctrl.stderr());
+
+    let summary = plant_summary(&plant);
+    assert_eq!((summary["ticks"].as_u64(), summary["drops"].as_u64()), (Some(60_000), Some(0)), "the loop never noticed: {summary}");
+    let why = summary["recording_stopped_early"].as_str().unwrap_or_else(|| panic!("no reason in {summary}"));
+    println!("recording_stopped_early: {why}");
+    assert!(why.starts_with("disk full (ENOSPC) at tick ") && why.contains("No space left on device"), "{why}");
+    let rec = Recording::open_complete(&out).unwrap();
+    assert_eq!(rec.integrity, Integrity::StoppedEarly(why.to_string()));
+    let last = rec.joint_state.last().unwrap().tick;
+    assert!(why.contains(&format!("the file keeps the ticks up to {last}")), "{why}");
+    assert_eq!(*rec.check_continuity().unwrap().start(), 0);
+    assert!(last > 0 && last < 59_999, "stopped in the middle: {last}");
+}
