@@ -255,9 +255,20 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
             );
             return Ok(summary);
         }
-        if let Some(w) = ports.receive_wrench() {
-            check_version(cfg.contract_version, w.contract_version, "wrench").map_err(anyhow::Error::from)?;
-            wrench = w;
+        // plant-sim publishes the wrench before the state; another plant (a replay tool, a
+        // third-party simulator) may not, and a controller that polled the state's shared memory
+        // would then be a few µs ahead of the wrench. Wait (bounded) for the wrench of this very
+        // tick instead of answering with the last tick's force.
+        let wrench_wait_until = Instant::now() + WRENCH_WAIT;
+        loop {
+            if let Some(w) = ports.receive_wrench() {
+                check_version(cfg.contract_version, w.contract_version, "wrench").map_err(anyhow::Error::from)?;
+                wrench = w;
+            }
+            if wrench.tick >= state.tick || Instant::now() >= wrench_wait_until {
+                break;
+            }
+            std::hint::spin_loop();
         }
         if last_tick.is_some_and(|t| state.tick <= t) {
             continue; // already answered
@@ -328,6 +339,10 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         }
     }
 }
+
+/// Longest wait for the wrench of the tick whose state arrived (it follows the state by a few
+/// µs). Beyond it the newest wrench is used.
+const WRENCH_WAIT: Duration = Duration::from_micros(50);
 
 /// The scenario's `loop.controller_spin_us`, s.
 fn scenario_spin_s(s: &Scenario) -> f64 {

@@ -104,12 +104,24 @@ pub struct ControlLaw {
     /// False while the plant holds or stops the arm or the wheel is off the strip: the force
     /// integral stands still (anti-windup: an error the torque cannot act on is not integrated).
     integrating: bool,
+    /// Force mode on the previous step: the force loop starts afresh when it (re)engages.
+    last_force_mode: bool,
+    /// Normal velocity at the (re-)engagement of the force law, faded out of the impedance's
+    /// damping over [`ENGAGE_FADE_S`]: ticks of the fade done and in all.
+    engage_v0_mps: f64,
+    engage_tick: u32,
+    engage_ticks: u32,
 }
+
+/// Over this time the impedance's damping (6.3) takes over the normal velocity the wheel had
+/// when the force law engaged: b_d/m_d ≈ 940 1/s turns even 0.1 mm/s into a 0.1 m/s² step
+/// (about 8 N m at the shoulder) if it acts at once.
+pub const ENGAGE_FADE_S: f64 = 0.03;
 
 impl ControlLaw {
     /// `robot`: the controller's model; `rot_ref_base`: the constant tool orientation reference.
     pub fn new(robot: Robot, task: TaskFrame, gains: Gains, rot_ref_base: Matrix3<f64>) -> ControlLaw {
-        ControlLaw { robot, task, gains, rot_ref_base, integral_ns: 0.0, integrating: true }
+        ControlLaw { robot, task, gains, rot_ref_base, integral_ns: 0.0, integrating: true, last_force_mode: false, engage_v0_mps: 0.0, engage_tick: 0, engage_ticks: 0 }
     }
 
     pub fn robot(&self) -> &Robot {
@@ -177,10 +189,25 @@ impl ControlLaw {
         // Translation in the task frame (7.8), task y replaced by (6.3) in contact.
         let pos_err = r.pos_m - kin.pos_task_m;
         let mut a_task = r.acc_mps2 + pos_err * g.kp_pos + (r.vel_mps - kin.vel_task_mps) * g.kd_pos;
+        // (6.3) damps the velocity relative to the one a changing set-point needs on a
+        // spring of the design stiffness: F_e = k_s y, so ẏ_r = Ḟ_r / k_s
+        let mut vel_ff = if g.force_rate_feedforward { r.force_rate_y_nps / g.force.strip_stiffness_n_per_m } else { 0.0 };
+        if r.force_mode && !self.last_force_mode {
+            // (Re-)engaging the force law, from the measured force (the reference starts there):
+            // an integral kept from before would be a step of k_i ∫ in the commanded force, and
+            // the velocity of the moment is faded out of the damping (ENGAGE_FADE_S).
+            self.integral_ns = 0.0;
+            self.engage_v0_mps = kin.vel_task_mps.y - vel_ff;
+            self.engage_tick = 0;
+            self.engage_ticks = (ENGAGE_FADE_S / dt).round() as u32;
+        }
+        self.last_force_mode = r.force_mode;
         if r.force_mode {
-            // (6.3) damps the velocity relative to the one a changing set-point needs on a
-            // spring of the design stiffness: F_e = k_s y, so ẏ_r = Ḟ_r / k_s
-            let vel_ff = if g.force_rate_feedforward { r.force_rate_y_nps / g.force.strip_stiffness_n_per_m } else { 0.0 };
+            if self.engage_tick < self.engage_ticks {
+                let (b, _, _) = crate::reference::cosine_blend(self.engage_tick as f64 / self.engage_ticks as f64);
+                vel_ff += self.engage_v0_mps * (1.0 - b);
+                self.engage_tick += 1;
+            }
             let dt_integral = if self.integrating { dt } else { 0.0 };
             a_task.y = impedance_accel(g, &mut self.integral_ns, r.force_y_n, force_meas_n, kin.vel_task_mps.y - vel_ff, dt_integral);
         } else if self.integrating {

@@ -451,14 +451,22 @@ impl ReferenceGenerator {
                 let (d, v, _) = reapproach_profile(t - t0, p.approach_ramp_s, v0, p.approach_speed_mps);
                 Contact::Touchdown { t0: t, y0: y0 + d, v0: -v }
             }
-            Contact::Touchdown { t0, .. } if t - t0 >= TOUCHDOWN_S => {
+            // The hand-over also waits for the re-engagement's fade to end: the arm must not
+            // still be moving along the strip (over the bulge that is a normal velocity the
+            // impedance would damp at once).
+            Contact::Touchdown { t0, .. } if t - t0 >= TOUCHDOWN_S && t - self.reengage_t0 >= REENGAGE_S => {
                 self.force_from = Some((t, force_y_n));
                 // The plan moves again: ease into its velocity instead of stepping to it (the
                 // arm stood still while the strip was found again).
+                // Re-base the fade on the reference as it stands (still re-engaging, the plan
+                // standing still), so that neither position nor velocity steps.
+                let before = self.reference_at(t - self.held_s, t);
                 self.contact = Contact::Pressing;
-                let plan = self.reference_at(t - self.held_s, t);
                 self.pos_offset_m = Vector3::zeros();
-                self.vel_offset_mps = -plan.vel_mps;
+                self.vel_offset_mps = Vector3::zeros();
+                let plan = self.reference_at(t - self.held_s, t);
+                self.pos_offset_m = before.pos_m - plan.pos_m;
+                self.vel_offset_mps = before.vel_mps - plan.vel_mps;
                 self.reengage_t0 = t;
                 Contact::Pressing
             }
@@ -601,15 +609,19 @@ impl ReferenceGenerator {
                 }
             }
         }
-        // Measured − planned pose and velocity at the re-engagement, fading out along a cubic
-        // Hermite curve over REENGAGE_S (value and slope matched at both ends: the reference
-        // starts at the measured state and joins the plan C¹).
+        // Measured − planned pose and velocity at the re-engagement, fading out along a quintic
+        // Hermite curve over REENGAGE_S: value and slope matched at the start, value, slope and
+        // acceleration zero at both ends (no step in the acceleration feed-forward either).
         if self.pos_offset_m != Vector3::zeros() || self.vel_offset_mps != Vector3::zeros() {
             let tt = REENGAGE_S;
             let x = ((t - self.reengage_t0) / tt).clamp(0.0, 1.0);
-            let (h00, h10) = (2.0 * x * x * x - 3.0 * x * x + 1.0, x * x * x - 2.0 * x * x + x);
-            let (d00, d10) = ((6.0 * x * x - 6.0 * x) / tt, 3.0 * x * x - 4.0 * x + 1.0);
-            let (a00, a10) = ((12.0 * x - 6.0) / (tt * tt), (6.0 * x - 4.0) / tt);
+            let (x2, x3) = (x * x, x * x * x);
+            let h0 = 1.0 - 10.0 * x3 + 15.0 * x2 * x2 - 6.0 * x3 * x2;
+            let d0 = (-30.0 * x2 + 60.0 * x3 - 30.0 * x2 * x2) / tt;
+            let a0 = (-60.0 * x + 180.0 * x2 - 120.0 * x3) / (tt * tt);
+            let h1 = (x - 6.0 * x3 + 8.0 * x2 * x2 - 3.0 * x3 * x2) * tt;
+            let d1 = 1.0 - 18.0 * x2 + 32.0 * x3 - 15.0 * x2 * x2;
+            let a1 = (-36.0 * x + 96.0 * x2 - 60.0 * x3) / tt;
             let (mut o, mut ov) = (self.pos_offset_m, self.vel_offset_mps);
             // Task y belongs to the force law or to the re-contact's own profile there.
             if r.force_mode || !matches!(self.contact, Contact::Pressing) {
@@ -617,9 +629,9 @@ impl ReferenceGenerator {
                 ov.y = 0.0;
             }
             if x < 1.0 {
-                r.pos_m += o * h00 + ov * (h10 * tt);
-                r.vel_mps += o * d00 + ov * d10;
-                r.acc_mps2 += o * a00 + ov * a10;
+                r.pos_m += o * h0 + ov * h1;
+                r.vel_mps += o * d0 + ov * d1;
+                r.acc_mps2 += o * a0 + ov * a1;
             }
         }
     }
@@ -816,10 +828,19 @@ mod tests {
         let t_touch = t + k as f64 * 1e-3;
         let r = g.update(t_touch, -1.0, r.pos_m.y);
         assert!(!r.force_mode && r.vel_mps.y < 0.0, "touchdown from the approach speed");
-        let r = g.update(t_touch + TOUCHDOWN_S, -2.0, r.pos_m.y);
-        assert!(r.force_mode && (r.force_y_n + 2.0).abs() < 1e-12, "force starts at the measured -2 N: {}", r.force_y_n);
+        // The force law takes over once the touchdown is over and the re-engagement's fade has
+        // ended (the arm no longer moves along the strip), from the force measured then.
+        let mut tk = t_touch;
+        let mut r = r;
+        while !r.force_mode {
+            tk += 1e-3;
+            r = g.update(tk, -2.0, r.pos_m.y);
+            assert!(tk < t_touch + 1.0, "never handed over");
+        }
+        assert!(tk >= t_touch + TOUCHDOWN_S - 1e-9 && tk >= t + REENGAGE_S - 1e-9, "handed over at {tk}");
+        assert!((r.force_y_n + 2.0).abs() < 1e-12, "force starts at the measured -2 N: {}", r.force_y_n);
         assert!(!g.holds_clock());
-        let r = g.update(t_touch + TOUCHDOWN_S + REENGAGE_S + 1e-3, -10.0, r.pos_m.y);
+        let r = g.update(tk + REENGAGE_S + 1e-3, -10.0, r.pos_m.y);
         assert!((r.force_y_n + 10.0).abs() < 1e-9 && r.phase == Phase::Roll);
     }
 

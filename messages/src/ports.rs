@@ -301,10 +301,12 @@ impl PlantPorts {
         &self.rig
     }
 
-    /// Publish state and wrench of one tick, then wake the controller.
+    /// Publish wrench and state of one tick, then wake the controller. The wrench goes first: a
+    /// controller that polls for the state (shared memory, no notification) then finds that
+    /// tick's wrench already there, even if this thread is preempted between the two sends.
     pub fn publish(&self, state: &JointState, wrench: &Wrench) -> Result<(), PortError> {
-        self.state_pub.send_copy(*state).map_err(|e| err(&self.rig, "send joint state", e))?;
         self.wrench_pub.send_copy(*wrench).map_err(|e| err(&self.rig, "send wrench", e))?;
+        self.state_pub.send_copy(*state).map_err(|e| err(&self.rig, "send joint state", e))?;
         self.state_ready.notify().map_err(|e| err(&self.rig, "notify state_ready", e))?;
         Ok(())
     }
