@@ -12,6 +12,7 @@
 
 #[cfg(feature = "logging")]
 pub mod logging;
+pub mod host;
 pub mod ports;
 pub mod qos;
 pub mod services;
