@@ -109,6 +109,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         spin_ns: if mode == Mode::Realtime { (l.spin_wait_us * 1e3).round() as u64 } else { 0 },
     };
 
+    // Before any node: the rig's iceoryx2 configuration, room in /dev/shm, and this rig name for
+    // this plant alone (held until the recording is finished).
+    let iox_config = messages::host::prepare()?;
+    let _claim = messages::host::claim_plant(&opts.rig, iox_config)?;
     let cleaned = messages::ports::clean_dead_nodes();
     if cleaned > 0 {
         tracing::info!("removed the shared-memory leftovers of {cleaned} dead iceoryx2 node(s)");
