@@ -40,6 +40,11 @@ pub const RIG_SHM_BYTES: u64 = 19 * 4096;
 /// runs out delivers SIGBUS on the first touch of a mapped page).
 pub const SHM_REQUIRED_BYTES: u64 = 4 * RIG_SHM_BYTES;
 
+/// Longest state directory: iceoryx2 puts its event sockets in `<dir>/iox2/`, named
+/// `<prefix><node id>.event`, and a Unix socket path has 108 bytes: 40 + 6 + 22 (prefix for a
+/// 5-digit uid) + 33 (node id digits, with room to grow) + 6 + NUL = 108.
+pub const MAX_STATE_DIR_LEN: usize = 40;
+
 /// The shipped template of the rig's iceoryx2 configuration.
 pub const CONFIG_TEMPLATE: &str = include_str!("../iceoryx2.toml");
 
@@ -97,6 +102,12 @@ pub fn config_path() -> PathBuf {
 /// Create `dir` (mode 0700) or check that it is a directory of ours that nobody else can enter.
 fn private_dir(dir: &Path) -> Result<(), HostError> {
     let uid = euid();
+    if dir.as_os_str().len() > MAX_STATE_DIR_LEN {
+        return Err(shm_error(format!(
+            "the rig's state directory {} is longer than {MAX_STATE_DIR_LEN} bytes, too long for iceoryx2's socket paths: set {STATE_DIR_ENV} to a shorter one",
+            dir.display()
+        )));
+    }
     if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty() && !p.exists()) {
         std::fs::DirBuilder::new().recursive(true).mode(0o700).create(parent).map_err(|e| {
             shm_error(format!("cannot create {} for the rig's iceoryx2 files ({e}); set {STATE_DIR_ENV} to a directory of yours", parent.display()))
@@ -115,7 +126,7 @@ fn private_dir(dir: &Path) -> Result<(), HostError> {
     let m = std::fs::symlink_metadata(dir).map_err(|e| shm_error(format!("cannot inspect {} ({e})", dir.display())))?;
     if !m.is_dir() || m.uid() != uid {
         return Err(shm_error(format!(
-            "the rig's state directory {} is not a directory owned by you (uid {uid}; it belongs to uid {}): another user created it first; remove it, or set {STATE_DIR_ENV} to a directory of yours",
+            "the rig's state directory {} is not a directory owned by you (uid {uid}; it belongs to uid {}): if another user created it first, remove it; or set {STATE_DIR_ENV} to a directory of yours",
             dir.display(),
             m.uid()
         )));
@@ -129,7 +140,7 @@ fn private_dir(dir: &Path) -> Result<(), HostError> {
 
 /// The template with this user's root path and a fresh random prefix.
 fn effective_config_text(dir: &Path) -> Result<String, HostError> {
-    let mut random = [0u8; 8];
+    let mut random = [0u8; 6];
     File::open("/dev/urandom")
         .and_then(|mut f| f.read_exact(&mut random))
         .map_err(|e| shm_error(format!("cannot read /dev/urandom for the rig's iceoryx2 prefix ({e})")))?;
@@ -365,9 +376,31 @@ pub fn claim_plant(rig: &str, cfg: &Config) -> Result<PlantClaim, HostError> {
         }
         // The PID for a plant that loses the race before this one's node exists.
         let _ = f.set_len(0).and_then(|_| f.rewind()).and_then(|_| write!(f, "{}", std::process::id()));
+        remove_stale_locks(&path);
         return Ok(PlantClaim { lock: f, path });
     }
     Err(rig_taken(rig, None))
+}
+
+/// Remove the lock files that killed plants left behind (unlocked ones), each while holding its
+/// lock, so a plant that opened it just before finds it unlinked and starts over.
+fn remove_stale_locks(ours: &Path) {
+    let Some(dir) = ours.parent() else { return };
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for e in entries.flatten() {
+        let p = e.path();
+        let name = e.file_name();
+        let name = name.to_string_lossy();
+        if p == ours || !(name.starts_with("plant-") && name.ends_with(".lock")) {
+            continue;
+        }
+        if let Ok(f) = OpenOptions::new().read(true).custom_flags(libc::O_NOFOLLOW).open(&p) {
+            // SAFETY: flock on a descriptor we own.
+            if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+                let _ = std::fs::remove_file(&p);
+            }
+        }
+    }
 }
 
 static SIGBUS_MESSAGE: OnceLock<Vec<u8>> = OnceLock::new();
