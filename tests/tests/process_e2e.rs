@@ -106,15 +106,15 @@ fn gone(pid: i32) -> bool {
     }
 }
 
-/// Start `rig ARGS`, wait until both daemons run and `recording` exists, SIGKILL the launcher:
-/// both daemons must be gone within 1 s, the recording complete (the plant finalised it on the
-/// SIGTERM of PR_SET_PDEATHSIG), and no daemon may panic on the closed pipe or stderr.
-fn kill_launcher(tag: &str, args: &[&str], dir: &Path, recording: &Path) {
+/// Start `rig ARGS`, wait until its `daemons` children run (and `recording` exists), SIGKILL the
+/// launcher: the daemons must be gone within 1 s, the recording complete (the plant finalised it
+/// on the SIGTERM of PR_SET_PDEATHSIG), and no daemon may panic on the closed pipe or stderr.
+fn kill_launcher(tag: &str, args: &[&str], dir: &Path, daemons: usize, recording: Option<&Path>) {
     let mut rig = Daemon::start(tag, &bin("rig"), args, dir);
     let t0 = Instant::now();
     let kids = loop {
         let k = children(rig.pid());
-        if k.len() == 2 && recording.exists() {
+        if k.len() == daemons && recording.is_none_or(|r| r.exists()) {
             break k;
         }
         assert!(t0.elapsed() < Duration::from_secs(30), "{tag}: daemons did not start:\n{}", rig.stderr());
@@ -128,12 +128,24 @@ fn kill_launcher(tag: &str, args: &[&str], dir: &Path, recording: &Path) {
         std::thread::sleep(Duration::from_millis(5));
     }
     let took = killed.elapsed();
+    if took >= Duration::from_secs(1) {
+        // Orphans of a failing run must not outlive the test.
+        for &k in &kids {
+            // SAFETY: signalling the processes this test started (through rig).
+            unsafe { libc::kill(k, libc::SIGKILL) };
+        }
+    }
     assert!(took < Duration::from_secs(1), "{tag}: daemons {kids:?} still there {took:?} after SIGKILL of rig");
     let err = rig.stderr();
     assert!(!err.contains("panicked"), "{tag}: a daemon panicked:\n{err}");
-    let rec = Recording::open_complete(recording).unwrap_or_else(|e| panic!("{tag}: recording not finalised: {e:#}\n{err}"));
-    assert!(!rec.joint_state.is_empty());
-    println!("{tag}: daemons gone {took:?} after SIGKILL of the launcher; recording finalised with {} ticks", rec.joint_state.len());
+    match recording {
+        Some(r) => {
+            let rec = Recording::open_complete(r).unwrap_or_else(|e| panic!("{tag}: recording not finalised: {e:#}\n{err}"));
+            assert!(!rec.joint_state.is_empty());
+            println!("{tag}: daemons gone {took:?} after SIGKILL of the launcher; recording finalised with {} ticks", rec.joint_state.len());
+        }
+        None => println!("{tag}: {daemons} daemon(s) gone {took:?} after SIGKILL of the launcher"),
+    }
 }
 
 #[test]
@@ -143,7 +155,7 @@ fn sigkill_of_rig_run_ends_both_daemons_within_a_second_and_the_recording_is_fin
     let dir = temp_dir(&rig);
     let scenario = write_scenario(&dir, "realtime", "");
     let out = dir.join("out");
-    kill_launcher("rig-run", &["run", scenario.to_str().unwrap(), "--duration", "300", "--out", out.to_str().unwrap()], &dir, &out.join("run.mcap"));
+    kill_launcher("rig-run", &["run", scenario.to_str().unwrap(), "--duration", "300", "--out", out.to_str().unwrap()], &dir, 2, Some(&out.join("run.mcap")));
 }
 
 #[test]
@@ -152,7 +164,7 @@ fn sigkill_of_rig_timing_ends_both_daemons_within_a_second() {
     let rig = unique_rig("kill-timing");
     let dir = temp_dir(&rig);
     let out = dir.join("out");
-    kill_launcher("rig-timing", &["timing", "--seconds", "300", "--out", out.to_str().unwrap()], &dir, &out.join("run.mcap"));
+    kill_launcher("rig-timing", &["timing", "--seconds", "300", "--out", out.to_str().unwrap()], &dir, 2, Some(&out.join("run.mcap")));
 }
 
 #[test]
@@ -166,8 +178,22 @@ fn sigkill_of_rig_sweep_ends_both_daemons_within_a_second() {
         "rig-sweep",
         &["sweep", scenario.to_str().unwrap(), "--set", "loop.max_consecutive_misses=20,21", "--duration", "3000", "--out", out.to_str().unwrap()],
         &dir,
-        &out.join("case-00").join("run.mcap"),
+        2,
+        Some(&out.join("case-00").join("run.mcap")),
     );
+}
+
+#[test]
+fn sigkill_of_rig_replay_ends_its_controller_within_a_second() {
+    let _g = serial();
+    let t = TestRig::new("kill-replay", "lockstep");
+    let mut plant = t.plant(0.5);
+    let mut ctrl = t.controller("controller", "controller", &[]);
+    assert!(plant.expect_exit(LONG).success(), "plant: {}", plant.stderr());
+    ctrl.expect_exit(Duration::from_secs(10));
+    // 500 ticks at 1/20 of the recorded rate: 10 s of replay.
+    let rec = t.recording();
+    kill_launcher("rig-replay", &["replay", rec.to_str().unwrap(), "--controller", "--speed", "0.05"], &t.dir, 1, None);
 }
 
 /// True when this process may make private mount namespaces (root with `unshare`); otherwise
