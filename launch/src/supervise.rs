@@ -102,11 +102,21 @@ fn signal_name(sig: i32) -> &'static str {
     }
 }
 
+/// "ended with exit status N (...)" or "was killed by signal N (...)".
+fn ended(status: ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    if status.signal().is_some() {
+        format!("was {}", describe(status))
+    } else {
+        format!("ended with {}", describe(status))
+    }
+}
+
 /// How a daemon that `rig` stopped ended: "cleanly" only for exit status 0.
 fn describe_stopped(status: Option<ExitStatus>) -> String {
     match status {
         Some(s) if s.success() => "stopped cleanly".to_string(),
-        Some(s) => format!("ended with {}", describe(s)),
+        Some(s) => ended(s),
         None => "could not be reaped".to_string(),
     }
 }
@@ -221,11 +231,11 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             if s.success() {
                 match c {
                     Some(c) if c.success() => Ending::Completed,
-                    Some(c) => Ending::ControllerFailed(format!("controller ended with {} after the plant finished", describe(c))),
+                    Some(c) => Ending::ControllerFailed(format!("controller {} after the plant finished", ended(c))),
                     None => Ending::ControllerFailed("controller could not be reaped".into()),
                 }
             } else {
-                Ending::PlantFailed(format!("plant-sim ended with {}; controller {}", describe(s), describe_stopped(c)))
+                Ending::PlantFailed(format!("plant-sim {}; controller {}", ended(s), describe_stopped(c)))
             }
         }
         c = controller.wait() => {
@@ -234,7 +244,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             // starts first and owns the rig.
             if let Ok(Some(p)) = plant.try_wait() {
                 if !p.success() && !c.success() {
-                    return finish(Ending::PlantFailed(format!("plant-sim ended with {}; controller ended with {}", describe(p), describe(c))), reader).await;
+                    return finish(Ending::PlantFailed(format!("plant-sim {}; controller {}", ended(p), ended(c))), reader).await;
                 }
             }
             // A controller exits 0 only after the plant's goodbye: then the plant is finishing too.
@@ -248,7 +258,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             } else if c.success() {
                 Ending::PlantFailed(format!("plant-sim {} after the controller finished", describe_stopped(p)))
             } else {
-                Ending::ControllerFailed(format!("controller ended early with {}; plant-sim {}", describe(c), describe_stopped(p)))
+                Ending::ControllerFailed(format!("controller quit early: it {}; plant-sim {}", ended(c), describe_stopped(p)))
             }
         }
         _ = sigint.recv() => {
@@ -270,4 +280,19 @@ async fn finish(ending: Ending, reader: tokio::task::JoinHandle<String>) -> anyh
     let out = tokio::time::timeout(Duration::from_secs(5), reader).await.ok().and_then(|r| r.ok()).unwrap_or_default();
     let plant_summary = out.lines().rev().find_map(|line| serde_json::from_str::<serde_json::Value>(line).ok());
     Ok(Outcome { ending, plant_summary })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::process::ExitStatusExt;
+
+    #[test]
+    fn only_exit_status_0_is_clean_and_signals_are_named() {
+        assert_eq!(describe_stopped(Some(ExitStatus::from_raw(0))), "stopped cleanly");
+        let bus = describe_stopped(Some(ExitStatus::from_raw(libc::SIGBUS)));
+        assert!(bus.starts_with("was killed by signal 7 (SIGBUS") && !bus.contains("clean"), "{bus}");
+        let shm = describe_stopped(Some(ExitStatus::from_raw(messages::host::EXIT_SHARED_MEMORY << 8)));
+        assert_eq!(shm, "ended with exit status 71 (shared memory unusable, see its message above)");
+    }
 }

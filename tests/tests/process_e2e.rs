@@ -98,53 +98,98 @@ fn children(pid: i32) -> Vec<i32> {
     out
 }
 
-/// Gone: no such process, or a zombie (it has exited; nobody reaped it yet).
-fn gone(pid: i32) -> bool {
-    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
-        Err(_) => true,
-        Ok(stat) => stat.rsplit_once(')').is_some_and(|(_, r)| r.trim_start().starts_with('Z')),
-    }
+/// How `rig`'s output reaches this test in [`kill_launcher`].
+#[derive(Clone, Copy, PartialEq)]
+enum Output {
+    /// Files: read afterwards for panics.
+    Files,
+    /// Pipes whose read ends close with the launcher: every write of a daemon to stdout or
+    /// stderr after that fails with EPIPE.
+    ClosedPipes,
 }
 
 /// Start `rig ARGS`, wait until its `daemons` children run (and `recording` exists), SIGKILL the
-/// launcher: the daemons must be gone within 1 s, the recording complete (the plant finalised it
-/// on the SIGTERM of PR_SET_PDEATHSIG), and no daemon may panic on the closed pipe or stderr.
-fn kill_launcher(tag: &str, args: &[&str], dir: &Path, daemons: usize, recording: Option<&Path>) {
-    let mut rig = Daemon::start(tag, &bin("rig"), args, dir);
+/// launcher. This test is their subreaper, so it reaps them and sees how they ended: gone within
+/// 1 s, the plant with exit status 0 (it finalised the recording on the SIGTERM of
+/// PR_SET_PDEATHSIG and printed its summary into the dead pipe without panicking: a panic is
+/// status 101), a controller with 0 or SIGTERM.
+fn kill_launcher(tag: &str, args: &[&str], dir: &Path, daemons: usize, recording: Option<&Path>, output: Output) {
+    // SAFETY: plain prctl on this process; orphans of rig become this process's children.
+    assert_eq!(unsafe { libc::prctl(libc::PR_SET_CHILD_SUBREAPER, 1 as libc::c_ulong, 0, 0, 0) }, 0);
+    let err_path = dir.join(format!("{tag}.stderr"));
+    let mut cmd = Command::new(bin("rig"));
+    cmd.args(args).stdin(std::process::Stdio::null());
+    match output {
+        Output::Files => {
+            cmd.stdout(std::fs::File::create(dir.join(format!("{tag}.stdout"))).unwrap());
+            cmd.stderr(std::fs::File::create(&err_path).unwrap());
+        }
+        Output::ClosedPipes => {
+            cmd.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped());
+        }
+    }
+    let mut rig = cmd.spawn().unwrap();
+    let rig_pid = rig.id() as i32;
     let t0 = Instant::now();
     let kids = loop {
-        let k = children(rig.pid());
+        let k = children(rig_pid);
         if k.len() == daemons && recording.is_none_or(|r| r.exists()) {
             break k;
         }
-        assert!(t0.elapsed() < Duration::from_secs(30), "{tag}: daemons did not start:\n{}", rig.stderr());
+        assert!(t0.elapsed() < Duration::from_secs(30), "{tag}: daemons did not start ({k:?})");
         std::thread::sleep(Duration::from_millis(20));
     };
+    let names: Vec<String> = kids.iter().map(|k| std::fs::read_to_string(format!("/proc/{k}/comm")).unwrap_or_default().trim().to_string()).collect();
     std::thread::sleep(Duration::from_millis(700));
-    rig.signal(libc::SIGKILL);
+    let _ = rig.kill();
     let killed = Instant::now();
-    rig.expect_exit(Duration::from_secs(5));
-    while !kids.iter().all(|&k| gone(k)) && killed.elapsed() < Duration::from_secs(5) {
-        std::thread::sleep(Duration::from_millis(5));
+    let _ = rig.wait();
+    // The launcher's pipes die with it (this test holds no other end open).
+    drop(rig.stdout.take());
+    drop(rig.stderr.take());
+    let mut statuses: Vec<Option<i32>> = vec![None; kids.len()];
+    while statuses.iter().any(Option::is_none) && killed.elapsed() < Duration::from_secs(5) {
+        for (i, &k) in kids.iter().enumerate() {
+            if statuses[i].is_none() {
+                let mut st = 0;
+                // SAFETY: waiting for an orphan this process reaps as subreaper.
+                if unsafe { libc::waitpid(k, &mut st, libc::WNOHANG) } == k {
+                    statuses[i] = Some(st);
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(2));
     }
     let took = killed.elapsed();
-    if took >= Duration::from_secs(1) {
-        // Orphans of a failing run must not outlive the test.
-        for &k in &kids {
-            // SAFETY: signalling the processes this test started (through rig).
-            unsafe { libc::kill(k, libc::SIGKILL) };
+    for (i, &k) in kids.iter().enumerate() {
+        if statuses[i].is_none() {
+            // Orphans of a failing run must not outlive the test.
+            // SAFETY: signalling and reaping a process this test started (through rig).
+            unsafe {
+                libc::kill(k, libc::SIGKILL);
+                libc::waitpid(k, std::ptr::null_mut(), 0);
+            }
         }
     }
-    assert!(took < Duration::from_secs(1), "{tag}: daemons {kids:?} still there {took:?} after SIGKILL of rig");
-    let err = rig.stderr();
+    assert!(took < Duration::from_secs(1), "{tag}: daemons {names:?} {kids:?} still there {took:?} after SIGKILL of rig");
+    let err = std::fs::read_to_string(&err_path).unwrap_or_default();
     assert!(!err.contains("panicked"), "{tag}: a daemon panicked:\n{err}");
+    for (name, st) in names.iter().zip(&statuses) {
+        let st = st.unwrap();
+        let (exited, code, sig) = (libc::WIFEXITED(st), libc::WEXITSTATUS(st), libc::WTERMSIG(st));
+        if name == "plant-sim" {
+            assert!(exited && code == 0, "{tag}: plant-sim ended with raw status {st:#x} (exit {code}, signal {sig}); 101 = panic\n{err}");
+        } else {
+            assert!((exited && code == 0) || (!exited && sig == libc::SIGTERM), "{tag}: {name} ended with raw status {st:#x}\n{err}");
+        }
+    }
     match recording {
         Some(r) => {
             let rec = Recording::open_complete(r).unwrap_or_else(|e| panic!("{tag}: recording not finalised: {e:#}\n{err}"));
             assert!(!rec.joint_state.is_empty());
-            println!("{tag}: daemons gone {took:?} after SIGKILL of the launcher; recording finalised with {} ticks", rec.joint_state.len());
+            println!("{tag}: {names:?} gone {took:?} after SIGKILL of the launcher; recording finalised with {} ticks", rec.joint_state.len());
         }
-        None => println!("{tag}: {daemons} daemon(s) gone {took:?} after SIGKILL of the launcher"),
+        None => println!("{tag}: {names:?} gone {took:?} after SIGKILL of the launcher"),
     }
 }
 
@@ -155,7 +200,18 @@ fn sigkill_of_rig_run_ends_both_daemons_within_a_second_and_the_recording_is_fin
     let dir = temp_dir(&rig);
     let scenario = write_scenario(&dir, "realtime", "");
     let out = dir.join("out");
-    kill_launcher("rig-run", &["run", scenario.to_str().unwrap(), "--duration", "300", "--out", out.to_str().unwrap()], &dir, 2, Some(&out.join("run.mcap")));
+    kill_launcher("rig-run", &["run", scenario.to_str().unwrap(), "--duration", "300", "--out", out.to_str().unwrap()], &dir, 2, Some(&out.join("run.mcap")), Output::Files);
+}
+
+#[test]
+fn sigkill_of_rig_run_with_its_output_in_pipes_leaves_no_daemon_panicking_on_them() {
+    let _g = serial();
+    let rig = unique_rig("kill-pipes");
+    let dir = temp_dir(&rig);
+    let scenario = write_scenario(&dir, "realtime", "");
+    let out = dir.join("out");
+    let args = ["run", scenario.to_str().unwrap(), "--duration", "300", "--out", out.to_str().unwrap()];
+    kill_launcher("rig-run-pipes", &args, &dir, 2, Some(&out.join("run.mcap")), Output::ClosedPipes);
 }
 
 #[test]
@@ -164,7 +220,7 @@ fn sigkill_of_rig_timing_ends_both_daemons_within_a_second() {
     let rig = unique_rig("kill-timing");
     let dir = temp_dir(&rig);
     let out = dir.join("out");
-    kill_launcher("rig-timing", &["timing", "--seconds", "300", "--out", out.to_str().unwrap()], &dir, 2, Some(&out.join("run.mcap")));
+    kill_launcher("rig-timing", &["timing", "--seconds", "300", "--out", out.to_str().unwrap()], &dir, 2, Some(&out.join("run.mcap")), Output::Files);
 }
 
 #[test]
@@ -180,6 +236,7 @@ fn sigkill_of_rig_sweep_ends_both_daemons_within_a_second() {
         &dir,
         2,
         Some(&out.join("case-00").join("run.mcap")),
+        Output::Files,
     );
 }
 
@@ -193,7 +250,39 @@ fn sigkill_of_rig_replay_ends_its_controller_within_a_second() {
     ctrl.expect_exit(Duration::from_secs(10));
     // 500 ticks at 1/20 of the recorded rate: 10 s of replay.
     let rec = t.recording();
-    kill_launcher("rig-replay", &["replay", rec.to_str().unwrap(), "--controller", "--speed", "0.05"], &t.dir, 1, None);
+    kill_launcher("rig-replay", &["replay", rec.to_str().unwrap(), "--controller", "--speed", "0.05"], &t.dir, 1, None, Output::Files);
+}
+
+#[test]
+fn a_sigbus_in_the_plant_is_one_sentence_and_exit_71_and_rig_names_the_plant() {
+    // What a tmpfs that fills up after the check delivers on the first touch of a mapped page;
+    // sent here by hand, as no test can time a full tmpfs to the middle of a run.
+    let _g = serial();
+    let rig = unique_rig("sigbus");
+    let dir = temp_dir(&rig);
+    let scenario = write_scenario(&dir, "realtime", "");
+    let out = dir.join("out");
+    let mut run = Daemon::start("rig", &bin("rig"), &["run", scenario.to_str().unwrap(), "--duration", "30", "--out", out.to_str().unwrap()], &dir);
+    let t0 = Instant::now();
+    let plant = loop {
+        let k = children(run.pid());
+        let plant = k.iter().copied().find(|p| std::fs::read_to_string(format!("/proc/{p}/comm")).is_ok_and(|c| c.trim() == "plant-sim"));
+        if let (Some(p), true) = (plant, k.len() == 2 && run.stderr().contains("connected")) {
+            break p;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(30), "daemons did not start:\n{}", run.stderr());
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    // SAFETY: signalling a process this test started (through rig).
+    unsafe { libc::kill(plant, libc::SIGBUS) };
+    let st = run.expect_exit(Duration::from_secs(20));
+    let err = run.stderr();
+    assert_eq!(st.code(), Some(2), "rig names the plant:\n{err}");
+    assert!(err.contains("plant-sim: error: shared memory in /dev/shm failed under the rig (SIGBUS"), "{err}");
+    let verdict = err.lines().find(|l| l.contains("FAILED")).unwrap();
+    assert!(verdict.contains("PLANT FAILED: plant-sim ended with exit status 71"), "{verdict}");
+    assert!(!verdict.contains("signal 7") && !verdict.contains("cleanly"), "{verdict}");
+    println!("{verdict}");
 }
 
 /// True when this process may make private mount namespaces (root with `unshare`); otherwise
@@ -275,10 +364,11 @@ export RIG_ICEORYX2_DIR={state}
     let verdict = rig_err.lines().find(|l| l.contains("FAILED")).unwrap_or_else(|| panic!("rig named nobody:\n{rig_err}"));
     match rig_code {
         2 => assert!(verdict.contains("PLANT FAILED: plant-sim ended with exit status 71"), "{verdict}"),
-        3 => assert!(verdict.contains("CONTROLLER FAILED: controller ended early with exit status 71"), "{verdict}"),
+        3 => assert!(verdict.contains("CONTROLLER FAILED: controller quit early: it ended with exit status 71"), "{verdict}"),
         c => panic!("rig exit {c}, expected 2 (plant) or 3 (controller):\n{rig_err}"),
     }
     assert!(!verdict.contains("signal 7") && !verdict.contains("cleanly (killed"), "{verdict}");
+
     assert!(rig_err.contains(needle), "the daemon's sentence reaches the user:\n{rig_err}");
     println!("{tag}: rig exit {rig_code}: {verdict}");
 }
