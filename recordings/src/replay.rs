@@ -218,6 +218,8 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
     messages::services::validate_rig_name(&rig).map_err(anyhow::Error::msg)?;
     let tmp_dir = std::env::temp_dir().join(format!("rig-replay-{}", std::process::id()));
 
+    // The replay is the rig's plant: not on a rig whose plant runs (nor may one start meanwhile).
+    let _claim = messages::host::claim_plant(&rig, messages::host::prepare()?)?;
     let ports = PlantPorts::open(&rig, "replay").with_context(|| format!("opening the services of rig {rig:?}"))?;
     let mut blend = 0;
     let mut child = ChildGuard(None);

@@ -46,6 +46,9 @@ fn assert_undisturbed(t: &TestRig, plant: &mut Daemon, ctrl: &mut Daemon, ticks:
     rec.check_continuity().expect("every tick recorded once");
     assert_eq!(rec.events_of(EventKind::SafeStop).count(), 0, "{:?}", rec.events);
     assert_eq!(rec.events_of(EventKind::ControllerChange).count(), 1, "{:?}", rec.events);
+    for d in [&*plant, &*ctrl] {
+        assert!(!d.stderr().contains("No config file"), "iceoryx2 ran without the rig's configuration:\n{}", d.stderr());
+    }
 }
 
 #[test]
@@ -440,6 +443,11 @@ timeout 5 setpriv --reuid=65534 --regid=65534 --clear-groups env RIG_ICEORYX2_DI
 timeout 1 setpriv --reuid=65534 --regid=65534 --clear-groups env RIG_ICEORYX2_DIR={other_state} {ctrl} --rig {rig} --scenario {s} >/dev/null 2>{d}/other_ctrl2.err; echo other_ctrl_own_dir=$?
 wait $P; echo plant=$?
 wait $C; echo controller=$?
+# and the next rig starts too, after the other user's attempts
+{plant} --rig {rig}-2 --scenario {s} --mode lockstep --duration 0.3 --out {d}/run2.mcap >{d}/plant2.out 2>{d}/plant2.err &
+P=$!
+{ctrl} --rig {rig}-2 --scenario {s} >/dev/null 2>{d}/ctrl2.err; echo controller2=$?
+wait $P; echo plant2=$?
 "#,
         plant = plant.display(),
         ctrl = ctrl.display(),
@@ -451,6 +459,8 @@ wait $C; echo controller=$?
     assert_eq!(field(&out, "squat_state_dir"), "no", "the other user must not be able to create the rig's state directory");
     assert_eq!(field(&out, "plant"), "0", "the rig did not start or run:\n{}", read("plant.err"));
     assert_eq!(field(&out, "controller"), "0", "{}", read("ctrl.err"));
+    assert_eq!(field(&out, "plant2"), "0", "the next rig did not start:\n{}", read("plant2.err"));
+    assert_eq!(field(&out, "controller2"), "0", "{}", read("ctrl2.err"));
     let other = read("other.txt");
     assert!(!other.contains("wrote ") && !other.contains("read "), "the other user reached the rig's files:\n{other}\n{}", read("shm.txt"));
     let seen: usize = field(&other, "rig_files_seen").parse().unwrap();
