@@ -6,6 +6,7 @@
 pub mod contact;
 pub mod gate;
 pub mod histogram;
+pub mod launcher;
 pub mod loop_rt;
 pub mod physics;
 pub mod rt;

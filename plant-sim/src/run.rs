@@ -88,6 +88,7 @@ impl RunSummary {
 
 /// Run the plant until the duration is reached or SIGINT/SIGTERM arrives.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
+    let launcher = crate::launcher::Launcher::now();
     messages::services::validate_rig_name(&opts.rig).map_err(anyhow::Error::msg)?;
     let scenario = Scenario::load(&opts.scenario_path)?;
     let scenario_text = std::fs::read_to_string(&opts.scenario_path)
@@ -215,6 +216,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     }
 
     let stats = PlantLoop { ports: &ports, physics: &mut physics, gate: &mut gate, recorder: recorder.as_mut(), params, last_log_tick: None }.run();
+    if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone()) {
+        r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
+    }
     let drops = recorder.as_ref().map_or(0, |r| r.dropped());
     if let Some(r) = recorder {
         r.finish().context("finishing the recording")?;
