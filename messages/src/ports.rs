@@ -151,7 +151,9 @@ fn newest_matching<T: core::fmt::Debug + ZeroCopySend + Copy>(
 }
 
 /// Wait until `fd` is readable or the absolute `deadline` passes (monotonic clock, ns precision).
-/// Returns true if readable. EINTR restarts the wait with the remaining time.
+/// Returns true if readable. A signal ends the wait early (the daemons catch only SIGINT/SIGTERM,
+/// their stop requests): a lockstep plant whose controller died with it would otherwise sit out
+/// its whole watchdog before it looks at its stop flag.
 pub fn wait_readable(fd: i32, deadline: Instant) -> bool {
     loop {
         let now = Instant::now();
@@ -170,9 +172,10 @@ pub fn wait_readable(fd: i32, deadline: Instant) -> bool {
         if r == 0 {
             continue; // timed out: the loop head re-checks the deadline
         }
-        if std::io::Error::last_os_error().raw_os_error() != Some(libc::EINTR) {
-            return false;
+        if std::io::Error::last_os_error().raw_os_error() == Some(libc::EINTR) {
+            return poll_once(fd, Duration::ZERO);
         }
+        return false;
     }
 }
 
