@@ -76,9 +76,10 @@ fn euid() -> u32 {
 
 /// The user's state directory: the iceoryx2 root path, the effective config and the plants'
 /// lock files live there, mode 0700. `$RIG_ICEORYX2_DIR` if set; else `/run/rig-iceoryx2` for
-/// root and `/run/user/<uid>/rig-iceoryx2` for a user with a login runtime directory (only root
-/// can create entries there, so no other user can take the name first); else
-/// `/tmp/rig-iceoryx2-<uid>`.
+/// root (only root can create entries in /run) and `/run/user/<uid>/rig-iceoryx2` for a user with
+/// a login runtime directory (the user's own, mode 0700): there no other user can take the name
+/// first. Else `/tmp/rig-iceoryx2-<uid>`, which another user could create first (refused, with
+/// the fix).
 pub fn state_dir() -> PathBuf {
     if let Some(d) = std::env::var_os(STATE_DIR_ENV).filter(|d| !d.is_empty()) {
         return d.into();
