@@ -25,13 +25,20 @@ struct Args {
 
 fn main() -> ExitCode {
     messages::logging::init_stderr();
+    messages::host::exit_on_sigbus("controller");
     let args = Args::parse();
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            tracing::error!("{e:#}");
-            eprintln!("controller: error: {e:#}");
-            ExitCode::FAILURE
+            // A host problem is said once, below; other errors also go to the log.
+            if e.downcast_ref::<messages::host::HostError>().is_none() {
+                tracing::error!("{e:#}");
+            }
+            // Tolerates a closed stderr (a launcher that died).
+            messages::host::print_stderr(&format!("controller: error: {e:#}\n"));
+            // Shared memory unusable has its own status (71, `messages::host`), other errors 1.
+            let code = e.downcast_ref::<messages::host::HostError>().map_or(1, |h| h.exit_code);
+            ExitCode::from(code as u8)
         }
     }
 }
@@ -39,6 +46,8 @@ fn main() -> ExitCode {
 fn run(args: &Args) -> anyhow::Result<()> {
     messages::services::validate_rig_name(&args.rig).map_err(anyhow::Error::msg)?;
     let scenario = scenario::Scenario::load(&args.scenario)?;
+    // Before any node: the rig's iceoryx2 configuration and room in /dev/shm.
+    messages::host::prepare()?;
     let mut cfg = controller::daemon::DaemonConfig::new(&args.rig, scenario);
     cfg.rt_priority = args.rt_priority;
     if let Some(v) = args.contract_version {

@@ -93,10 +93,37 @@ def build_model(robot_cfg):
     return model
 
 
+# --- The rig's iceoryx2 configuration (messages/README.md, "iceoryx2 configuration"): every peer
+# loads the file the rig's daemons write into the user's owner-only state directory.
+def rig_config_path():
+    d = os.environ.get("RIG_ICEORYX2_DIR")
+    if not d:
+        uid = os.geteuid()
+        run_user = f"/run/user/{uid}"
+        if uid == 0:
+            d = "/run/rig-iceoryx2"
+        elif os.path.isdir(run_user) and os.stat(run_user).st_uid == uid:
+            d = f"{run_user}/rig-iceoryx2"
+        else:
+            d = f"/tmp/rig-iceoryx2-{uid}"
+    return os.path.join(d, "iceoryx2.toml")
+
+def rig_config(wait_s=30.0):
+    """The plant writes the file on its first start; a controller started with it waits for it."""
+    path = rig_config_path()
+    until = time.monotonic() + wait_s
+    while not os.path.exists(path):
+        if time.monotonic() > until:
+            sys.exit(f"hold_controller.py: error: no rig iceoryx2 configuration at {path} after {wait_s:.0f} s: "
+                     "start plant-sim (it writes the file), or set RIG_ICEORYX2_DIR as for the plant")
+        time.sleep(0.05)
+    return iox2.config.from_file(iox2.FilePath.new(path))
+
+
 # --- Ports: the contract's services and QoS (messages/src/qos.rs); any difference and opening fails.
 def open_ports(rig):
     iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
-    node = (iox2.NodeBuilder.new().name(iox2.NodeName.new(f"python-hold-controller/{rig}"))
+    node = (iox2.NodeBuilder.new().name(iox2.NodeName.new(f"python-hold-controller/{rig}")).config(rig_config())
             .signal_handling_mode(iox2.SignalHandlingMode.Disabled).create(iox2.ServiceType.Ipc))
     node.try_cleanup_dead_nodes()  # a killed peer leaves its shared memory behind
     name = lambda svc: iox2.ServiceName.new(f"rig/{rig}/{svc}")

@@ -420,7 +420,8 @@ fn main() {
         Ok(code) => std::process::exit(code),
         Err(e) => {
             eprintln!("rig: error: {e:#}");
-            std::process::exit(1);
+            // `rig replay` as a plant: the daemons' statuses for a taken rig name or unusable shared memory.
+            std::process::exit(e.downcast_ref::<messages::host::HostError>().map_or(1, |h| h.exit_code));
         }
     }
 }

@@ -82,9 +82,42 @@ pub fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
 fn describe(status: ExitStatus) -> String {
     use std::os::unix::process::ExitStatusExt;
     match (status.code(), status.signal()) {
+        (Some(c), _) if c == messages::host::EXIT_SHARED_MEMORY => format!("exit status {c} (shared memory unusable, see its message above)"),
+        (Some(c), _) if c == messages::host::EXIT_RIG_TAKEN => format!("exit status {c} (the rig name is taken)"),
         (Some(c), _) => format!("exit status {c}"),
-        (None, Some(s)) => format!("killed by signal {s}"),
+        (None, Some(s)) => format!("killed by signal {s} ({})", signal_name(s)),
         _ => "unknown status".into(),
+    }
+}
+
+fn signal_name(sig: i32) -> &'static str {
+    match sig {
+        libc::SIGBUS => "SIGBUS: a bus error, e.g. shared memory that /dev/shm could not back",
+        libc::SIGSEGV => "SIGSEGV",
+        libc::SIGABRT => "SIGABRT: it aborted",
+        libc::SIGKILL => "SIGKILL",
+        libc::SIGTERM => "SIGTERM",
+        libc::SIGINT => "SIGINT",
+        _ => "a signal",
+    }
+}
+
+/// "ended with exit status N (...)" or "was killed by signal N (...)".
+fn ended(status: ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    if status.signal().is_some() {
+        format!("was {}", describe(status))
+    } else {
+        format!("ended with {}", describe(status))
+    }
+}
+
+/// How a daemon that `rig` stopped ended: "cleanly" only for exit status 0.
+fn describe_stopped(status: Option<ExitStatus>) -> String {
+    match status {
+        Some(s) if s.success() => "stopped cleanly".to_string(),
+        Some(s) => ended(s),
+        None => "could not be reaped".to_string(),
     }
 }
 
@@ -122,6 +155,13 @@ fn spawn(cmd: &mut Command, what: &str, bin: &Path) -> anyhow::Result<Child> {
     // Own process group: a terminal Ctrl-C reaches rig only, which then stops the plant first so
     // the controller sees the plant's goodbye instead of dying at the same instant.
     cmd.process_group(0).kill_on_drop(true).stdin(Stdio::null());
+    // SIGTERM to the child when rig dies, even by SIGKILL (the plant then finalises its
+    // recording). PDEATHSIG follows the spawning thread: rig's runtime is current-thread, so this
+    // is the main thread, which lives as long as rig.
+    // SAFETY: the hook calls only prctl/getppid/getpid between fork and exec.
+    unsafe {
+        cmd.pre_exec(messages::host::die_with_parent());
+    }
     cmd.spawn().with_context(|| format!("starting the {what} {}", bin.display()))
 }
 
@@ -191,15 +231,22 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             if s.success() {
                 match c {
                     Some(c) if c.success() => Ending::Completed,
-                    Some(c) => Ending::ControllerFailed(format!("controller ended with {} after the plant finished", describe(c))),
+                    Some(c) => Ending::ControllerFailed(format!("controller {} after the plant finished", ended(c))),
                     None => Ending::ControllerFailed("controller could not be reaped".into()),
                 }
             } else {
-                Ending::PlantFailed(format!("plant-sim ended with {}; controller stopped", describe(s)))
+                Ending::PlantFailed(format!("plant-sim {}; controller {}", ended(s), describe_stopped(c)))
             }
         }
         c = controller.wait() => {
             let c = c?;
+            // Both gone already (e.g. both refused a full /dev/shm): the plant is named first, it
+            // starts first and owns the rig.
+            if let Ok(Some(p)) = plant.try_wait() {
+                if !p.success() && !c.success() {
+                    return finish(Ending::PlantFailed(format!("plant-sim {}; controller {}", ended(p), ended(c))), reader).await;
+                }
+            }
             // A controller exits 0 only after the plant's goodbye: then the plant is finishing too.
             let p = if c.success() {
                 await_or_stop(&mut plant, Duration::from_secs(5)).await
@@ -208,12 +255,10 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             };
             if c.success() && p.is_some_and(|p| p.success()) {
                 Ending::Completed
+            } else if c.success() {
+                Ending::PlantFailed(format!("plant-sim {} after the controller finished", describe_stopped(p)))
             } else {
-                Ending::ControllerFailed(format!(
-                "controller ended early with {}; plant stopped cleanly ({})",
-                describe(c),
-                p.map_or("not reaped".to_string(), describe)
-            ))
+                Ending::ControllerFailed(format!("controller quit early: it {}; plant-sim {}", ended(c), describe_stopped(p)))
             }
         }
         _ = sigint.recv() => {
@@ -227,7 +272,27 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             Ending::Interrupted
         }
     };
+    finish(ending, reader).await
+}
+
+/// The outcome with the plant's summary line, once its stdout is read to the end.
+async fn finish(ending: Ending, reader: tokio::task::JoinHandle<String>) -> anyhow::Result<Outcome> {
     let out = tokio::time::timeout(Duration::from_secs(5), reader).await.ok().and_then(|r| r.ok()).unwrap_or_default();
     let plant_summary = out.lines().rev().find_map(|line| serde_json::from_str::<serde_json::Value>(line).ok());
     Ok(Outcome { ending, plant_summary })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::process::ExitStatusExt;
+
+    #[test]
+    fn only_exit_status_0_is_clean_and_signals_are_named() {
+        assert_eq!(describe_stopped(Some(ExitStatus::from_raw(0))), "stopped cleanly");
+        let bus = describe_stopped(Some(ExitStatus::from_raw(libc::SIGBUS)));
+        assert!(bus.starts_with("was killed by signal 7 (SIGBUS") && !bus.contains("clean"), "{bus}");
+        let shm = describe_stopped(Some(ExitStatus::from_raw(messages::host::EXIT_SHARED_MEMORY << 8)));
+        assert_eq!(shm, "ended with exit status 71 (shared memory unusable, see its message above)");
+    }
 }

@@ -44,10 +44,30 @@ class JointTorque(ctypes.Structure):
     type_name = staticmethod(lambda: "rig::JointTorque")
 
 
+def rig_config():
+    """The rig's iceoryx2 configuration (messages/README.md, "iceoryx2 configuration"): the file
+    the plant writes into the user's owner-only state directory; started with it, wait for it."""
+    d = os.environ.get("RIG_ICEORYX2_DIR")
+    if not d:
+        uid, run_user = os.geteuid(), f"/run/user/{os.geteuid()}"
+        if uid == 0:
+            d = "/run/rig-iceoryx2"
+        elif os.path.isdir(run_user) and os.stat(run_user).st_uid == uid:
+            d = f"{run_user}/rig-iceoryx2"
+        else:
+            d = f"/tmp/rig-iceoryx2-{uid}"
+    path, until = os.path.join(d, "iceoryx2.toml"), time.monotonic() + STARTUP_S
+    while not os.path.exists(path):
+        if time.monotonic() > until:
+            sys.exit(f"minimal_controller.py: error: no rig iceoryx2 configuration at {path}: start plant-sim first")
+        time.sleep(0.05)
+    return iox2.config.from_file(iox2.FilePath.new(path))
+
+
 def open_ports(rig):
     """A node and the rig's services with the contract's QoS (any other value and opening fails)."""
     iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
-    node = (iox2.NodeBuilder.new().name(iox2.NodeName.new(f"minimal-controller/{rig}"))
+    node = (iox2.NodeBuilder.new().name(iox2.NodeName.new(f"minimal-controller/{rig}")).config(rig_config())
             .signal_handling_mode(iox2.SignalHandlingMode.Disabled).create(iox2.ServiceType.Ipc))
     node.try_cleanup_dead_nodes()  # a killed peer leaves its shared memory behind
     name = lambda svc: iox2.ServiceName.new(f"rig/{rig}/{svc}")

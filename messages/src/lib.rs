@@ -12,6 +12,7 @@
 
 #[cfg(feature = "logging")]
 pub mod logging;
+pub mod host;
 pub mod liveness;
 pub mod ports;
 pub mod qos;

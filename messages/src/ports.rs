@@ -35,8 +35,9 @@ fn err(rig: &str, what: &str, e: impl std::fmt::Debug) -> PortError {
 /// Remove the shared-memory resources of iceoryx2 nodes whose process died (a killed plant or
 /// controller leaves them behind). Returns how many dead nodes were cleaned.
 pub fn clean_dead_nodes() -> usize {
+    let Ok(cfg) = crate::host::iceoryx2_config() else { return 0 };
     let mut cleaned = 0;
-    let _ = Node::<ipc::Service>::list(Config::global_config(), |state| {
+    let _ = Node::<ipc::Service>::list(cfg, |state| {
         if let NodeState::<ipc::Service>::Dead(view) = state {
             if view.try_remove_stale_resources().is_ok() {
                 cleaned += 1;
@@ -49,17 +50,26 @@ pub fn clean_dead_nodes() -> usize {
 
 /// The iceoryx2 node of one role on one rig (`<role>/<rig>`), as every port of this crate opens it.
 pub(crate) fn node(rig: &str, role: &str) -> Result<Node<ipc::Service>, PortError> {
-    // iceoryx2 warns on every start that no config file exists; keep its own log to errors unless
-    // the user asks for more with IOX2_LOG_LEVEL.
-    set_log_level_from_env_or(LogLevel::Error);
+    // The rig's own configuration (messages/iceoryx2.toml, per user; it also sets iceoryx2's log
+    // level to errors unless IOX2_LOG_LEVEL asks for more).
+    let cfg = crate::host::iceoryx2_config().map_err(|e| PortError(e.message))?;
     let name = format!("{role}/{rig}");
     let name: NodeName = name.as_str().try_into().map_err(|e| err(rig, "node name", e))?;
     // Our daemons handle SIGINT/SIGTERM themselves (finalise the recording, say goodbye).
-    NodeBuilder::new()
+    let node = NodeBuilder::new()
         .name(&name)
+        .config(cfg)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|e| err(rig, "create iceoryx2 node", e))
+        .map_err(|e| {
+            PortError(format!(
+                "rig {rig:?}: iceoryx2 could not create its node ({e:?}): check that {} has room and is writable and that {} is yours; if the rig's files vanish while it runs, systemd-logind removes a user's IPC at logout (set RemoveIPC=no)",
+                crate::host::SHM_DIR,
+                crate::host::state_dir().display()
+            ))
+        })?;
+    crate::host::lock_down_global_mgmt(cfg).map_err(|e| PortError(e.message))?;
+    Ok(node)
 }
 
 fn service_name(rig: &str, svc: &str) -> Result<ServiceName, PortError> {
@@ -142,7 +152,9 @@ fn newest_matching<T: core::fmt::Debug + ZeroCopySend + Copy>(
 }
 
 /// Wait until `fd` is readable or the absolute `deadline` passes (monotonic clock, ns precision).
-/// Returns true if readable. EINTR restarts the wait with the remaining time.
+/// Returns true if readable. A signal ends the wait early (the daemons catch only SIGINT/SIGTERM,
+/// their stop requests): a lockstep plant whose controller died with it would otherwise sit out
+/// its whole watchdog before it looks at its stop flag.
 pub fn wait_readable(fd: i32, deadline: Instant) -> bool {
     loop {
         let now = Instant::now();
@@ -161,9 +173,10 @@ pub fn wait_readable(fd: i32, deadline: Instant) -> bool {
         if r == 0 {
             continue; // timed out: the loop head re-checks the deadline
         }
-        if std::io::Error::last_os_error().raw_os_error() != Some(libc::EINTR) {
-            return false;
+        if std::io::Error::last_os_error().raw_os_error() == Some(libc::EINTR) {
+            return poll_once(fd, Duration::ZERO);
         }
+        return false;
     }
 }
 

@@ -7,6 +7,7 @@ pub mod arbiter;
 pub mod contact;
 pub mod gate;
 pub mod histogram;
+pub mod launcher;
 pub mod limits;
 pub mod loop_rt;
 pub mod physics;

@@ -1,6 +1,8 @@
 //! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR]`
 //!
 //! Runs the plant daemon; at exit prints one line of JSON with the run's summary on stdout.
+//! Exit status: 0 run completed, 1 error, 69 the rig name is held by a live plant, 71 shared
+//! memory unusable (`messages::host`).
 
 use std::path::PathBuf;
 
@@ -34,6 +36,7 @@ struct Args {
 
 fn main() {
     messages::logging::init_stderr();
+    messages::host::exit_on_sigbus("plant-sim");
     let a = Args::parse();
     let opts = plant_sim::run::RunOptions {
         rig: a.rig.clone(),
@@ -44,12 +47,13 @@ fn main() {
         cache_dir: a.cache_dir.unwrap_or_else(strip::cache::cache_dir),
     };
     match plant_sim::run::run(&opts) {
-        Ok(summary) => {
-            println!("{}", summary.to_json(&a.rig));
-        }
+        // Both writes tolerate a closed pipe: a launcher killed with SIGKILL leaves its end closed.
+        Ok(summary) => messages::host::print_stdout(&format!("{}\n", summary.to_json(&a.rig))),
         Err(e) => {
-            eprintln!("plant-sim: error: {e:#}");
-            std::process::exit(1);
+            messages::host::print_stderr(&format!("plant-sim: error: {e:#}\n"));
+            // A host problem (rig name taken, shared memory unusable) has its own status.
+            let code = e.downcast_ref::<messages::host::HostError>().map_or(1, |h| h.exit_code);
+            std::process::exit(code);
         }
     }
 }

@@ -98,6 +98,7 @@ impl RunSummary {
 
 /// Run the plant until the duration is reached or SIGINT/SIGTERM arrives.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
+    let launcher = crate::launcher::Launcher::now();
     messages::services::validate_rig_name(&opts.rig).map_err(anyhow::Error::msg)?;
     let scenario = Scenario::load(&opts.scenario_path)?;
     let scenario_text = std::fs::read_to_string(&opts.scenario_path)
@@ -119,6 +120,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         spin_ns: if mode == Mode::Realtime { (l.spin_wait_us * 1e3).round() as u64 } else { 0 },
     };
 
+    // Before any node: the rig's iceoryx2 configuration, room in /dev/shm, and this rig name for
+    // this plant alone (held until the recording is finished).
+    let iox_config = messages::host::prepare()?;
+    let _claim = messages::host::claim_plant(&opts.rig, iox_config)?;
     let cleaned = messages::ports::clean_dead_nodes();
     if cleaned > 0 {
         tracing::info!("removed the shared-memory leftovers of {cleaned} dead iceoryx2 node(s)");
@@ -237,6 +242,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         reflex_limits: crate::limits::ReflexLimits::from_scenario(&scenario),
     }
     .run();
+    if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone()) {
+        r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
+    }
     let drops = recorder.as_ref().map_or(0, |r| r.dropped());
     let recording_stopped_early = match recorder {
         Some(r) => r.finish().context("finishing the recording")?.stopped_early,

@@ -218,6 +218,8 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
     messages::services::validate_rig_name(&rig).map_err(anyhow::Error::msg)?;
     let tmp_dir = std::env::temp_dir().join(format!("rig-replay-{}", std::process::id()));
 
+    // The replay is the rig's plant: not on a rig whose plant runs (nor may one start meanwhile).
+    let _claim = messages::host::claim_plant(&rig, messages::host::prepare()?)?;
     let ports = PlantPorts::open(&rig, "replay").with_context(|| format!("opening the services of rig {rig:?}"))?;
     let mut blend = 0;
     let mut child = ChildGuard(None);
@@ -225,12 +227,15 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
         let exe = if path.as_os_str() == "auto" { default_controller()? } else { path.clone() };
         let scen = scenario_file(&rec, args.scenario.as_deref(), &tmp_dir)?;
         blend = blend_ticks(&scen, rec.period_s())?;
-        let c = Command::new(&exe)
-            .arg("--rig")
-            .arg(&rig)
-            .arg("--scenario")
-            .arg(&scen)
-            .stdin(Stdio::null())
+        let mut cmd = Command::new(&exe);
+        cmd.arg("--rig").arg(&rig).arg("--scenario").arg(&scen).stdin(Stdio::null());
+        // The controller ends with the replay, even a replay killed by SIGKILL (spawned from the
+        // main thread, which PDEATHSIG follows).
+        // SAFETY: the hook calls only prctl/getppid/getpid between fork and exec.
+        unsafe {
+            std::os::unix::process::CommandExt::pre_exec(&mut cmd, messages::host::die_with_parent());
+        }
+        let c = cmd
             .spawn()
             .with_context(|| format!("starting the controller {}", exe.display()))?;
         child.0 = Some(c);
