@@ -155,6 +155,10 @@ uint8 KIND_VERSION_MISMATCH=8
 uint8 KIND_RECORDING_ERROR=9
 uint8 KIND_FAULT=10
 uint8 KIND_INFO=11
+uint8 KIND_REFLEX=12
+uint8 KIND_END_STOP=13
+uint8 KIND_FOREIGN_TORQUE=14
+uint8 KIND_CONTROLLER_ENDED=15
 uint64 tick
 float64 sim_time                # s
 uint8 kind                      # KIND_*
