@@ -257,7 +257,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
                 Ending::Completed
             } else {
                 Ending::ControllerFailed(format!(
-                "controller ended early with {}; plant put into safe stop, then stopped cleanly ({})",
+                "controller ended early with {}; plant told (safe stop), then stopped cleanly ({})",
                 describe(c),
                 p.map_or("not reaped".to_string(), describe)
             ))
@@ -281,7 +281,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     let stopped_by_signal = plant_summary.as_ref().and_then(|v| v.get("stopped_by_signal")).and_then(serde_json::Value::as_bool);
     let ending = match ending {
         Ending::Completed if stopped_by_signal != Some(false) && controller_exited_first => Ending::ControllerFailed(
-            "controller exited 0 before the plant reached its end; plant put into safe stop, then stopped cleanly".into(),
+            "controller exited 0 before the plant reached its end; plant told (safe stop), then stopped cleanly".into(),
         ),
         Ending::Completed if stopped_by_signal == Some(true) => {
             Ending::PlantFailed("plant-sim was stopped by a signal (not from rig) before the end of the run".into())
