@@ -399,6 +399,35 @@ fn a_slow_controller_s_safe_stop_gives_exit_4() {
     assert!(rec.joint_state.iter().all(|s| s.tick < 300 || s.total_misses + 299 >= s.tick), "every tick from 300 on is a miss");
 }
 
+/// `rig sweep` with a controller that trips a reflex (lockstep, robot only, two cases): each case
+/// reached its end with a reflex, so the table says `4: 1 reflex (first at tick ...)` and the sweep
+/// exits 4.
+#[test]
+fn a_sweep_reports_a_case_with_exit_4_as_such() {
+    let _g = serial();
+    let rig = unique_rig("sweep4");
+    let dir = temp_dir(&rig);
+    let scenario = write_scenario(&dir, "lockstep", "");
+    let ctrl = fault_wrapper(&dir, "spin6.sh", &["--add-torque", "6:45@200"]);
+    let out = dir.join("sweep");
+    let mut sweep = Daemon::start(
+        "rig sweep",
+        &bin("rig"),
+        &["sweep", scenario.to_str().unwrap(), "--set", "loop.substeps=10,20", "--duration", "0.4", "--controller", ctrl.to_str().unwrap(), "--out", out.to_str().unwrap()],
+        &dir,
+    );
+    let st = sweep.expect_exit(LONG);
+    let table = sweep.stdout();
+    eprintln!("{table}");
+    assert_eq!(st.code(), Some(4), "{table}\n{}", sweep.stderr());
+    for case in ["loop.substeps=10", "loop.substeps=20"] {
+        let row = table.lines().find(|l| l.starts_with(&format!("| {case} |"))).unwrap_or_default();
+        assert!(row.contains("| 4: 1 reflex (first at tick 20") && row.contains("1 safe stop"), "{row}");
+    }
+    let cases: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("sweep.json")).unwrap()).unwrap();
+    assert!(cases.as_array().unwrap().iter().all(|c| c["exit_code"] == 4 && c["status"].as_str().unwrap().contains("reflex")), "{cases}");
+}
+
 /// `rig run` stopped by SIGTERM (real time, robot only): both daemons stopped cleanly, the
 /// recording finalised, exit 143; by SIGINT (Ctrl-C): 130.
 #[test]
