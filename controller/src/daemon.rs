@@ -148,29 +148,62 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     let mut summary = DaemonSummary::default();
     let mut compute_sum_ns: u128 = 0;
 
-    // Silence that means a dead plant. In lockstep the plant may legitimately be slow (a loaded
-    // machine, a batch of runs side by side): there its own torque watchdog is the measure.
+    // Silence after which the plant is asked about: dead (its node, see messages::liveness) ends
+    // the run at once; alive but silent (a stalled host, SIGSTOP) is waited for up to
+    // `loop.peer_stall_timeout_s`. In lockstep the plant may legitimately be slow (a loaded
+    // machine): its own torque watchdog is the first measure there.
+    let watch = messages::liveness::PeerWatch::spawn(&cfg.rig, "controller-watch", messages::liveness::Watched::Plant)
+        .with_context(|| format!("controller for rig {:?}", cfg.rig))?;
+    let stall_timeout = Duration::from_secs_f64(s.loop_.peer_stall_timeout_s).max(cfg.dead_plant_timeout);
     let lockstep_silence = cfg.dead_plant_timeout.max(Duration::from_secs_f64(s.loop_.lockstep_watchdog_s));
     let mut silence = cfg.dead_plant_timeout;
     let mut next_due: Option<Instant> = None;
+    // The plant this controller answers (publisher id of its joint state); another plant's states
+    // are not ours. A new plant after ours is gone is a new connection.
+    let mut plant: Option<u128> = None;
+    let mut stall_logged = false;
+    let mut was_stopped = false;
     loop {
         let deadline = match last_state_at {
+            Some(t) if stall_logged => (t + stall_timeout).min(Instant::now() + messages::liveness::WATCH_PERIOD),
             Some(t) => t + silence,
             None => started + cfg.startup_timeout,
         };
         let wake = wait_for_state(&ports, next_due.map(|due| (due, cfg.state_spin)), deadline);
         let woke = Instant::now();
-        let state = if wake == Wake::Timeout {
+        let received = if wake == Wake::Timeout {
             // A notification may have been consumed while we computed: one last look.
-            match ports.receive_state() {
-                Some(st) => st,
-                None => match last_tick {
-                    Some(t) => bail!(
-                        "rig {:?}: no joint state for {} ms after tick {t}: the plant died or stalled; exiting",
-                        cfg.rig,
-                        silence.as_millis()
-                    ),
-                    None => bail!(
+            match ports.receive_state_with_origin() {
+                Some(x) => x,
+                None => match (last_tick, last_state_at) {
+                    (Some(t), Some(at)) => {
+                        let quiet = woke.duration_since(at);
+                        if plant.is_some_and(|p| watch.is_gone(p)) {
+                            bail!(
+                                "rig {:?}: no joint state for {} ms after tick {t}: the plant died (its iceoryx2 node is dead); exiting",
+                                cfg.rig,
+                                quiet.as_millis()
+                            );
+                        }
+                        if quiet >= stall_timeout {
+                            bail!(
+                                "rig {:?}: no joint state for {:.1} s after tick {t}: the plant is alive but stalled; exiting",
+                                cfg.rig,
+                                quiet.as_secs_f64()
+                            );
+                        }
+                        if !stall_logged {
+                            tracing::warn!(
+                                "rig {:?}: no joint state for {} ms after tick {t}, but the plant's node is alive: waiting up to {:.1} s (loop.peer_stall_timeout_s)",
+                                cfg.rig,
+                                quiet.as_millis(),
+                                stall_timeout.as_secs_f64()
+                            );
+                            stall_logged = true;
+                        }
+                        continue;
+                    }
+                    _ => bail!(
                         "rig {:?}: no joint state within {:.1} s of starting: is plant-sim running on this rig?",
                         cfg.rig,
                         cfg.startup_timeout.as_secs_f64()
@@ -178,11 +211,33 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
                 },
             }
         } else {
-            match ports.receive_state() {
-                Some(st) => st,
+            match ports.receive_state_with_origin() {
+                Some(x) => x,
                 None => continue,
             }
         };
+        let (state, origin) = received;
+        match plant {
+            Some(p) if p != origin => {
+                if !watch.is_gone(p) {
+                    continue; // another plant's state: not ours
+                }
+                // Ours is gone and a new plant runs: start over as on a first connection.
+                tracing::warn!(rig = %cfg.rig, "a new plant replaced the one that died: connecting to it");
+                last_tick = None;
+                plant = Some(origin);
+                watch.follow(origin);
+            }
+            None => {
+                plant = Some(origin);
+                watch.follow(origin);
+            }
+            _ => {}
+        }
+        if stall_logged {
+            tracing::info!(rig = %cfg.rig, tick = state.tick, "the plant speaks again");
+            stall_logged = false;
+        }
         last_state_at = Some(woke);
         let lockstep = state.flags & state_flags::LOCKSTEP != 0;
         silence = if lockstep { lockstep_silence } else { cfg.dead_plant_timeout };
@@ -216,13 +271,36 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
             let kin = law.kinematics(&q, &qd);
             reference.reset_from(state.sim_time_s, &kin.pos_task_m);
         }
+        // Anti-windup (DESIGN section 10): while the plant holds our torque or is in safe stop,
+        // the plan stands still and the force integral too; coming back from a safe stop, the
+        // controller re-engages from the measured pose and force (no torque step).
+        let status = PlantStatus::from_u32(state.plant_status);
+        let stopped = status == Some(PlantStatus::SafeStop);
+        let running = matches!(status, Some(PlantStatus::Running | PlantStatus::WaitingForController));
+        if stopped && !was_stopped && !first {
+            let kin = law.kinematics(&q, &qd);
+            let w = wrench_on_tool_base(&wrench, &kin.rot_base_tool);
+            reference.reengage(state.sim_time_s, &kin.pos_task_m, &kin.vel_task_mps, law.strip_force_y(&Vector3::new(w[0], w[1], w[2])));
+        } else if !running && !first {
+            reference.hold(state.period_s);
+        }
+        was_stopped = stopped;
+        law.set_integrating(running && state.flags & state_flags::IN_CONTACT != 0);
         let (tau, diag) = step(&mut law, &mut reference, &state, &wrench, &q, &qd, cfg.contract_version);
         let mut diag = diag;
         let compute_ns = woke.elapsed().as_nanos() as u64;
         diag.compute_time_ns = compute_ns;
         let torque = JointTorque {
             contract_version: cfg.contract_version,
-            controller_status: if tau.iter().all(|x| x.is_finite()) { ControllerStatus::Active as u32 } else { ControllerStatus::Fault as u32 },
+            // A reflex latched the plant's safe stop: acknowledge it (starting) with the
+            // re-engaged torque, as libfranka's automatic error recovery does.
+            controller_status: if !tau.iter().all(|x| x.is_finite()) {
+                ControllerStatus::Fault as u32
+            } else if state.flags & state_flags::REFLEX != 0 {
+                ControllerStatus::Starting as u32
+            } else {
+                ControllerStatus::Active as u32
+            },
             tick: state.tick,
             controller_id: id,
             tau: tau.into(),

@@ -7,6 +7,7 @@
 //! evaluated as one RNEA call `rnea(q, q̇, a_q)` (which also carries the model's armature and
 //! viscous friction). J is the TCP Jacobian in base axes (rows v, ω); F_e is the wrench the robot
 //! exerts on the strip at the TCP, i.e. minus the measured wrench on the tool.
+//! See messages/README.md, Frames and signs.
 //!
 //! Task y (strip normal), in contact: a_y = (F_r − F_e + u_I − b_d ẏ)/m_d (6.3) with F_e the force
 //! on the strip along task y (negative = pressing) and u_I = k_i ∫(F_r − F_e) dt clamped to
@@ -100,12 +101,15 @@ pub struct ControlLaw {
     gains: Gains,
     rot_ref_base: Matrix3<f64>,
     integral_ns: f64,
+    /// False while the plant holds or stops the arm or the wheel is off the strip: the force
+    /// integral stands still (anti-windup: an error the torque cannot act on is not integrated).
+    integrating: bool,
 }
 
 impl ControlLaw {
     /// `robot`: the controller's model; `rot_ref_base`: the constant tool orientation reference.
     pub fn new(robot: Robot, task: TaskFrame, gains: Gains, rot_ref_base: Matrix3<f64>) -> ControlLaw {
-        ControlLaw { robot, task, gains, rot_ref_base, integral_ns: 0.0 }
+        ControlLaw { robot, task, gains, rot_ref_base, integral_ns: 0.0, integrating: true }
     }
 
     pub fn robot(&self) -> &Robot {
@@ -118,6 +122,11 @@ impl ControlLaw {
 
     pub fn task(&self) -> &TaskFrame {
         &self.task
+    }
+
+    /// Let the force integral run (true) or stand still (false, anti-windup).
+    pub fn set_integrating(&mut self, on: bool) {
+        self.integrating = on;
     }
 
     /// Clear the force integral (mode changes, controller take-over).
@@ -172,8 +181,11 @@ impl ControlLaw {
             // (6.3) damps the velocity relative to the one a changing set-point needs on a
             // spring of the design stiffness: F_e = k_s y, so ẏ_r = Ḟ_r / k_s
             let vel_ff = if g.force_rate_feedforward { r.force_rate_y_nps / g.force.strip_stiffness_n_per_m } else { 0.0 };
-            a_task.y = impedance_accel(g, &mut self.integral_ns, r.force_y_n, force_meas_n, kin.vel_task_mps.y - vel_ff, dt);
-        } else {
+            let dt_integral = if self.integrating { dt } else { 0.0 };
+            a_task.y = impedance_accel(g, &mut self.integral_ns, r.force_y_n, force_meas_n, kin.vel_task_mps.y - vel_ff, dt_integral);
+        } else if self.integrating {
+            // Position control by plan (approach, lift): the force loop starts afresh. While
+            // integration is frozen (re-finding the strip after a safe stop) the state is kept.
             self.integral_ns = 0.0;
         }
         let a_lin_base = self.task.vector_to_base(&a_task);

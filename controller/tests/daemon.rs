@@ -34,7 +34,11 @@ fn wrench(tick: u64) -> Wrench {
 }
 
 fn spawn(rig: &str, version: u32, dead: Duration) -> thread::JoinHandle<anyhow::Result<controller::daemon::DaemonSummary>> {
-    let mut cfg = DaemonConfig::new(rig, Scenario::default());
+    spawn_with(rig, version, dead, Scenario::default())
+}
+
+fn spawn_with(rig: &str, version: u32, dead: Duration, scenario: Scenario) -> thread::JoinHandle<anyhow::Result<controller::daemon::DaemonSummary>> {
+    let mut cfg = DaemonConfig::new(rig, scenario);
     cfg.contract_version = version;
     cfg.startup_timeout = Duration::from_secs(5);
     cfg.dead_plant_timeout = dead;
@@ -93,13 +97,37 @@ fn version_mismatch_exits_with_both_versions() {
     assert!(e.contains(&format!("version {}", CONTRACT_VERSION)) && e.contains(&format!("version {}", CONTRACT_VERSION + 7)), "{e}");
 }
 
+/// A plant that falls silent but stays alive (its node lives: a stalled host, SIGSTOP) is waited
+/// for up to `loop.peer_stall_timeout_s`, not declared dead after 100 ms of silence.
 #[test]
-fn silent_plant_is_detected_after_having_been_seen() {
+fn silent_but_living_plant_is_waited_for_up_to_the_stall_timeout() {
+    let rig = unique_rig("stall");
+    let plant = PlantPorts::open(&rig, "fake-plant").unwrap();
+    let mut s = Scenario::default();
+    s.loop_.peer_stall_timeout_s = 0.6;
+    let h = spawn_with(&rig, CONTRACT_VERSION, Duration::from_millis(100), s);
+    lockstep_ticks(&plant, 3, start_q());
+    let silent_from = Instant::now();
+    // Then silence, with the plant's node alive.
+    let e = h.join().unwrap().unwrap_err().to_string();
+    let waited = silent_from.elapsed();
+    assert!(e.contains("after tick 2: the plant is alive but stalled"), "{e}");
+    assert!(waited >= Duration::from_millis(600), "gave up after {waited:?}, before the stall timeout");
+    drop(plant);
+}
+
+/// A plant whose publisher is gone (its ports dropped; a killed process's node is dead) ends the
+/// controller at the first silence, without waiting for the stall timeout.
+#[test]
+fn gone_plant_is_detected_at_the_first_silence() {
     let rig = unique_rig("dead");
     let plant = PlantPorts::open(&rig, "fake-plant").unwrap();
     let h = spawn(&rig, CONTRACT_VERSION, Duration::from_millis(100));
     lockstep_ticks(&plant, 3, start_q());
-    // Then silence.
+    let gone_at = Instant::now();
+    drop(plant);
     let e = h.join().unwrap().unwrap_err().to_string();
-    assert!(e.contains("no joint state for 100 ms after tick 2"), "{e}");
+    assert!(e.contains("after tick 2: the plant died"), "{e}");
+    // Correctness, not timing: it did not wait for the default 5 s stall timeout.
+    assert!(gone_at.elapsed() < Duration::from_secs(4), "{:?}", gone_at.elapsed());
 }

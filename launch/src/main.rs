@@ -7,6 +7,9 @@
 //!   lockstep run per case, tabulated from the recordings.
 //! - `rig robot ...`, `rig model ...`, `rig replay`, `rig report`, `rig compare`, `rig design`: the tools of the
 //!   robot, strip, recordings and design crates.
+//!
+//! `run`, `timing` and `sweep` check every flag and every scenario value before any daemon starts;
+//! a refusal names the flag (and the file, line and field of a scenario value).
 
 mod summary;
 mod supervise;
@@ -61,8 +64,8 @@ struct RunArgs {
     #[arg(long, value_parser = ["realtime", "lockstep"])]
     mode: Option<String>,
     /// Override one scenario field, `section.field=value` (repeatable); the scenario actually run
-    /// is written to <DIR>/scenario.toml.
-    #[arg(long = "set", value_parser = sweep::parse_axis)]
+    /// is written to <DIR>/scenario.toml and checked like any scenario file before anything starts.
+    #[arg(long = "set", value_parser = sweep::parse_set)]
     set: Vec<sweep::Axis>,
     #[command(flatten)]
     launch: LaunchArgs,
@@ -76,7 +79,7 @@ struct LaunchArgs {
     #[arg(long)]
     controller: Option<PathBuf>,
     /// Simulated seconds to run, per case for a sweep (default: the scenario's).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = seconds)]
     duration: Option<f64>,
     /// Output directory (run: runs/<UTC time>-<rig>/, the recording is <DIR>/run.mcap; sweep:
     /// runs/sweep-<UTC time>/ with case-NN/{scenario.toml,run.mcap} and sweep.json).
@@ -87,7 +90,7 @@ struct LaunchArgs {
 #[derive(Debug, clap::Args)]
 struct TimingArgs {
     /// Length of the timing run, s.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = seconds)]
     seconds: f64,
     /// Scenario (default: the default scenario without the strip, holding its start pose).
     #[arg(long)]
@@ -102,11 +105,11 @@ struct TimingArgs {
     json: Option<PathBuf>,
     /// Let the plant busy-poll for the torque this long before sleeping, µs (scenario
     /// `loop.spin_wait_us`; default: the default scenario's).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = microseconds)]
     spin_us: Option<f64>,
     /// Let the controller busy-poll from this long before the state is due until this long
     /// after, µs (scenario `loop.controller_spin_us`; default: the default scenario's).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = microseconds)]
     controller_spin_us: Option<f64>,
     /// Let idle CPUs halt (do not hold /dev/cpu_dma_latency at 0; scenario `loop.idle_poll`).
     #[arg(long)]
@@ -118,13 +121,61 @@ struct SweepArgs {
     /// Base scenario (default: scenarios/default.toml).
     scenario: Option<PathBuf>,
     /// An axis: `section.field=v1,v2,...` (scenario field, TOML scalar values). Repeat for more.
-    #[arg(long = "set", required = true, value_parser = sweep::parse_axis)]
+    #[arg(long = "set", required = true, value_parser = sweep::parse_set)]
     axes: Vec<sweep::Axis>,
     /// Every combination of the axes' values (default: each axis varied alone around the base).
     #[arg(long)]
     grid: bool,
     #[command(flatten)]
     launch: LaunchArgs,
+}
+
+/// A flag's number in `unit`: finite, and > 0, or >= 0 where `zero_ok` (clap names the flag
+/// when it refuses one, before anything starts).
+fn flag_number(s: &str, zero_ok: bool, unit: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0)) => Ok(x),
+        Ok(_) => Err(format!("must be a finite number of {unit} {}", if zero_ok { ">= 0" } else { "> 0" })),
+        Err(_) => Err(format!("must be a number of {unit}")),
+    }
+}
+
+/// A flag's length of time, s (`--duration`, `--seconds`).
+fn seconds(s: &str) -> Result<f64, String> {
+    flag_number(s, false, "seconds")
+}
+
+/// A flag's busy-poll time, µs (the scenario's range then bounds it by the period and the
+/// torque budget).
+fn microseconds(s: &str) -> Result<f64, String> {
+    flag_number(s, true, "µs")
+}
+
+/// A run length from the command line must give the plant at least one tick of the scenario's
+/// period (`flag` names it in the message).
+fn check_duration(flag: &str, duration_s: Option<f64>, s: &scenario::Scenario, path: &Path) -> anyhow::Result<()> {
+    if let Some(d) = duration_s {
+        let period = s.loop_.period_s;
+        anyhow::ensure!(d >= period, "{flag} {d}: shorter than one control period (loop.period_s = {period} s in {})", path.display());
+    }
+    Ok(())
+}
+
+/// `--controller PATH` must name an executable file.
+fn check_controller(p: &Path) -> anyhow::Result<()> {
+    use std::os::unix::fs::PermissionsExt;
+    let meta = std::fs::metadata(p).with_context(|| format!("--controller {}", p.display()))?;
+    anyhow::ensure!(meta.is_file(), "--controller {}: not a file", p.display());
+    anyhow::ensure!(meta.permissions().mode() & 0o111 != 0, "--controller {}: not executable", p.display());
+    Ok(())
+}
+
+/// `--json FILE` is written after the run: its directory must exist before the run starts.
+fn check_output_file(flag: &str, p: &Path) -> anyhow::Result<()> {
+    anyhow::ensure!(!p.is_dir(), "{flag} {}: is a directory", p.display());
+    let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    anyhow::ensure!(dir.is_dir(), "{flag} {}: directory {} does not exist", p.display(), dir.display());
+    Ok(())
 }
 
 /// UTC time as `YYYYmmdd-HHMMSS`.
@@ -139,28 +190,30 @@ fn utc_stamp() -> String {
     format!("{:04}{:02}{:02}-{:02}{:02}{:02}", tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec)
 }
 
+/// Everything a run needs, every flag checked: nothing is started here.
 fn prepare(
     rig: String,
     scenario: PathBuf,
     mode: Option<String>,
-    duration_s: Option<f64>,
+    (duration_flag, duration_s): (&str, Option<f64>),
     out: Option<PathBuf>,
     controller: Option<PathBuf>,
 ) -> anyhow::Result<RigLaunch> {
     // Fail early, with file/line/field, before any process starts.
     let parsed = scenario::Scenario::load(&scenario)?;
+    check_duration(duration_flag, duration_s, &parsed, &scenario)?;
+    if let Some(p) = &controller {
+        check_controller(p)?;
+    }
     let lockstep = match mode.as_deref() {
         Some(m) => m == "lockstep",
         None => parsed.loop_.mode == scenario::Mode::Lockstep,
     };
     let dir = out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating output directory {}", dir.display()))?;
+    std::fs::create_dir_all(&dir).with_context(|| format!("--out {}: creating the output directory", dir.display()))?;
     let plant_bin = supervise::sibling_binary("plant-sim")?;
     let controller_bin = match controller {
-        Some(p) => {
-            anyhow::ensure!(p.is_file(), "controller {} does not exist", p.display());
-            p
-        }
+        Some(p) => p,
         None => supervise::sibling_binary("controller")?,
     };
     // The one strip-model cache `rig model build` fills too.
@@ -278,20 +331,21 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
     let mut planned = Vec::with_capacity(cases.len());
     for (n, case) in cases.iter().enumerate() {
         let case_dir = dir.join(format!("case-{n:02}"));
-        std::fs::create_dir_all(&case_dir).with_context(|| format!("creating {}", case_dir.display()))?;
+        std::fs::create_dir_all(&case_dir).with_context(|| format!("--out {}: creating {}", dir.display(), case_dir.display()))?;
         let path = case_dir.join("scenario.toml");
         let label = sweep::label(&a.axes, case);
         let mut doc = sweep::case_scenario(&base, &a.axes, case);
         doc.insert("description".into(), format!("rig sweep case {n}: {} with {label}", base_path.display()).into());
         std::fs::write(&path, toml::to_string(&doc)?).with_context(|| format!("writing {}", path.display()))?;
-        scenario::Scenario::load(&path)?;
+        let s = scenario::Scenario::load(&path).map_err(|e| sweep::blame_flags(e, &sweep::set_flags(&a.axes, case)))?;
+        check_duration("--duration", a.launch.duration, &s, &path)?;
         planned.push((case_dir, path, label));
     }
     let rt = runtime()?;
     let mut results = Vec::with_capacity(cases.len());
     let mut interrupted = None;
     for (n, (case_dir, path, label)) in planned.into_iter().enumerate() {
-        let mut l = prepare(supervise::unique_rig_name(), path.clone(), Some("lockstep".into()), a.launch.duration, Some(case_dir), a.launch.controller.clone())?;
+        let mut l = prepare(supervise::unique_rig_name(), path.clone(), Some("lockstep".into()), ("--duration", a.launch.duration), Some(case_dir), a.launch.controller.clone())?;
         l.quiet = true;
         eprintln!("rig sweep: case {}/{}: {label}", n + 1, cases.len());
         let outcome = rt.block_on(supervise::supervise(&l))?;
@@ -344,11 +398,13 @@ fn main() {
             if !a.set.is_empty() {
                 scenario = sweep::write_overridden(&scenario, &a.set, &dir.join("scenario.toml"))?;
             }
-            let l = prepare(rig, scenario, a.mode, a.launch.duration, Some(dir), a.launch.controller)?;
+            let l = prepare(rig, scenario, a.mode, ("--duration", a.launch.duration), Some(dir), a.launch.controller)?;
             launch_and_report(&l, false, None)
         })(),
         Cmd::Timing(a) => (|| {
-            anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
+            if let Some(j) = &a.json {
+                check_output_file("--json", j)?;
+            }
             let rig = supervise::unique_rig_name();
             let dir = a.out.clone().unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
             let scenario = match a.scenario.clone() {
@@ -358,9 +414,18 @@ fn main() {
                     }
                     s
                 }
-                None => timing_scenario(&dir, &a)?,
+                None => {
+                    let path = timing_scenario(&dir, &a)?;
+                    // the spin flags go into the scenario: its ranges bound them, named as flags
+                    let flags: Vec<(String, String)> = [("loop.spin_wait_us", "--spin-us", a.spin_us), ("loop.controller_spin_us", "--controller-spin-us", a.controller_spin_us)]
+                        .into_iter()
+                        .filter_map(|(key, flag, v)| v.map(|us| (key.to_string(), format!("{flag} {us}"))))
+                        .collect();
+                    scenario::Scenario::load(&path).map_err(|e| sweep::blame_flags(e, &flags))?;
+                    path
+                }
             };
-            let l = prepare(rig, scenario, Some("realtime".into()), Some(a.seconds), Some(dir), a.controller)?;
+            let l = prepare(rig, scenario, Some("realtime".into()), ("--seconds", Some(a.seconds)), Some(dir), a.controller)?;
             launch_and_report(&l, true, a.json.as_deref())
         })(),
         Cmd::Sweep(a) => run_sweep(a),

@@ -35,6 +35,48 @@ pub fn parse_axis(s: &str) -> anyhow::Result<Axis> {
     Ok(Axis { section: section.into(), field: field.into(), values })
 }
 
+/// `--set` as the command line gives it: `parse_axis`, and the field must be one of the
+/// scenario's (`scenario::fields::FIELDS`), so that a typo is refused before anything is written.
+pub fn parse_set(s: &str) -> anyhow::Result<Axis> {
+    let a = parse_axis(s)?;
+    let key = format!("{}.{}", a.section, a.field);
+    if scenario::fields::field(&key).is_none() {
+        let names = scenario::fields::names_in(&a.section);
+        if names.is_empty() {
+            let sections: Vec<String> = scenario::fields::sections().iter().filter(|s| !s.is_empty()).map(|s| format!("[{s}]")).collect();
+            anyhow::bail!("--set {s:?}: no scenario section [{}]; the sections are {}", a.section, sections.join(", "));
+        }
+        anyhow::bail!("--set {s:?}: no scenario field {key}; [{}] has {}", a.section, names.join(", "));
+    }
+    Ok(a)
+}
+
+/// A scenario error of a file written from command-line overrides, blamed on the flag that set
+/// the field (`flags`: field key and how the command line said it, e.g. ("bulge.height_mm",
+/// "--set bulge.height_mm=100")), or on all of them when the bad field is another one that they
+/// made invalid (z_end_mm beyond a shortened strip).
+pub fn blame_flags(e: scenario::ScenarioError, flags: &[(String, String)]) -> anyhow::Error {
+    let field = e.field().map(|f| f.split(['[', ' ']).next().unwrap_or(f).to_string());
+    let culprit = flags.iter().find(|(key, _)| field.as_deref() == Some(key.as_str()));
+    let context = match culprit {
+        Some((_, flag)) => flag.clone(),
+        None if flags.is_empty() => return e.into(),
+        None => format!("the scenario with {}", flags.iter().map(|(_, f)| f.as_str()).collect::<Vec<_>>().join(" ")),
+    };
+    anyhow::Error::new(e).context(context)
+}
+
+/// The `--set` flags of a case, for `blame_flags`.
+pub fn set_flags(axes: &[Axis], case: &[(usize, usize)]) -> Vec<(String, String)> {
+    case.iter()
+        .map(|&(a, v)| {
+            let key = format!("{}.{}", axes[a].section, axes[a].field);
+            let flag = format!("--set {key}={}", axes[a].values[v]);
+            (key, flag)
+        })
+        .collect()
+}
+
 /// The cases: each a list of (axis index, value index).
 pub fn cases(axes: &[Axis], grid: bool) -> Vec<Vec<(usize, usize)>> {
     if grid {
@@ -149,10 +191,10 @@ pub fn write_overridden(base_path: &Path, set: &[Axis], out: &Path) -> anyhow::R
     let mut doc = case_scenario(&base, set, &case);
     doc.insert("description".into(), format!("{} with {}", base_path.display(), label(set, &case)).into());
     if let Some(dir) = out.parent() {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        std::fs::create_dir_all(dir).with_context(|| format!("--out {}: creating the output directory", dir.display()))?;
     }
     std::fs::write(out, toml::to_string(&doc)?).with_context(|| format!("writing {}", out.display()))?;
-    scenario::Scenario::load(out)?;
+    scenario::Scenario::load(out).map_err(|e| blame_flags(e, &set_flags(set, &case)))?;
     Ok(out.to_path_buf())
 }
 
@@ -173,6 +215,17 @@ mod tests {
             let e = parse_axis(bad).unwrap_err().to_string();
             assert!(e.contains(bad), "{bad}: {e}");
         }
+    }
+
+    #[test]
+    fn set_names_only_scenario_fields() {
+        assert_eq!(parse_set("bulge.height_mm=0.1").unwrap(), parse_axis("bulge.height_mm=0.1").unwrap());
+        let e = parse_set("bulge.heigth_mm=1").unwrap_err().to_string();
+        assert!(e.contains("--set \"bulge.heigth_mm=1\": no scenario field bulge.heigth_mm; [bulge] has height_mm, half_width_mm, center_mm"), "{e}");
+        let e = parse_set("loops.period_s=1").unwrap_err().to_string();
+        assert!(e.contains("no scenario section [loops]; the sections are [loop],"), "{e}");
+        // the syntax errors of parse_axis stay
+        assert!(parse_set("bulge.height_mm").is_err());
     }
 
     #[test]
@@ -243,7 +296,11 @@ mod tests {
         let e = write_overridden(&base, &[parse_axis("bulge.height_mm=0.1,0.2").unwrap()], &out).unwrap_err().to_string();
         assert!(e.contains("bulge.height_mm") && e.contains("one value"), "{e}");
         let e = format!("{:#}", write_overridden(&base, &[parse_axis("trajectory.roll_s=-1").unwrap()], &out).unwrap_err());
-        assert!(e.contains("trajectory.roll_s") && e.contains(&out.display().to_string()), "{e}");
+        let at = format!("--set trajectory.roll_s=-1: scenario file {}, line ", out.display());
+        assert!(e.starts_with(&at) && e.contains(": field trajectory.roll_s = -1: must be in (0, ∞) s"), "{e}");
+        // a field the override made invalid: blamed on the overrides
+        let e = format!("{:#}", write_overridden(&base, &[parse_axis("strip.length_mm=20").unwrap()], &out).unwrap_err());
+        assert!(e.starts_with("the scenario with --set strip.length_mm=20: scenario file ") && e.contains("field trajectory.z_end_mm = 38"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

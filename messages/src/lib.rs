@@ -169,8 +169,9 @@ impl JointState {
 
 /// End-effector wrench of tick `tick`, as a 6-axis force/torque sensor reports it (plant → controller).
 ///
-/// This is the wrench the environment (strip) exerts ON the tool, F_e in (7.1) with the sign of
-/// the thesis: pressing the strip down gives a force along +y_task (= +z_base) on the tool.
+/// This is the wrench the environment (strip) exerts ON the tool, minus the F_e of (7.1) and of the
+/// controller's law (the wrench the robot exerts on the strip): pressing the strip down gives a
+/// force along +y_task (= +z_base) on the tool. See messages/README.md, Frames and signs.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("rig::Wrench")]
 #[repr(C)]

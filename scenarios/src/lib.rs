@@ -1,7 +1,9 @@
 //! Scenario files: one TOML file describes a whole run (loop timing, robot, strip, contact,
-//! references, controller gains, recording). Unknown fields are rejected and every error names the
-//! file, the line and the field. Lengths in files may carry an explicit `_mm` suffix; everything is
-//! converted to SI by the accessors of the consumers.
+//! references, controller gains, recording, safety). Every field is listed, with its unit, default,
+//! valid range and meaning, in one table (`fields::FIELDS`, printed in `scenarios/README.md`);
+//! loading checks every value against it before anything starts, and every error names the file,
+//! the line (or that the value is a default) and the field. Lengths in files may carry an explicit
+//! `_mm` suffix; everything is converted to SI by the accessors of the consumers.
 //!
 //! Every section has defaults equal to the default scenario (`scenarios/default.toml`), so a file
 //! only lists what it changes.
@@ -13,15 +15,66 @@ use std::path::{Path, PathBuf};
 /// (a 4 mm rectangle plus a half-disc of radius 4 mm on top). Plant and controller share it.
 pub const STRIP_TOP_HEIGHT_M: f64 = 0.008;
 
-/// Errors loading a scenario.
+mod check;
+pub mod fields;
+
+/// Where a value of a scenario comes from, for messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Place {
+    /// The file sets it on this line (1-based).
+    Line(usize),
+    /// The file does not set it: the built-in default (`fields::FIELDS` lists them).
+    Default,
+    /// A scenario built in code, not read from text: no line to name.
+    Unstated,
+}
+
+impl std::fmt::Display for Place {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Place::Line(n) => write!(f, ", line {n}"),
+            Place::Default => write!(f, ", default value (not set in the file)"),
+            Place::Unstated => Ok(()),
+        }
+    }
+}
+
+/// Errors loading a scenario. Each names the file, the line (or that a default is meant) and the
+/// field. A cause (the OS error of `Read`) is the error's `source()`, not part of its message, so
+/// that `{:#}` chains print it once.
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
-    #[error("cannot read scenario file {path}: {source}")]
+    #[error("cannot read scenario file {path}")]
     Read { path: PathBuf, source: std::io::Error },
+    /// Not TOML.
     #[error("scenario file {path}, line {line}, column {column}: {message}")]
     Parse { path: PathBuf, line: usize, column: usize, message: String },
-    #[error("scenario file {path}: field `{field}` = {value}: {why}")]
-    Invalid { path: PathBuf, field: std::borrow::Cow<'static, str>, value: String, why: &'static str },
+    /// A section or field (`what`) the table does not know (`known` lists what there is).
+    #[error("scenario file {path}, line {line}: unknown {what} {key}; {known}")]
+    Unknown { path: PathBuf, line: usize, what: &'static str, key: String, known: String },
+    /// A value of the wrong type or out of its range.
+    #[error("scenario file {path}{place}: field {field} = {value}: {why}")]
+    Field { path: PathBuf, place: Place, field: String, value: String, why: String },
+}
+
+impl ScenarioError {
+    /// The field (or section) the error is about, as `section.field`, `key[i]` for an element.
+    pub fn field(&self) -> Option<&str> {
+        match self {
+            ScenarioError::Unknown { key, .. } => Some(key),
+            ScenarioError::Field { field, .. } => Some(field),
+            _ => None,
+        }
+    }
+
+    /// Where the bad value stands.
+    pub fn place(&self) -> Option<Place> {
+        match self {
+            ScenarioError::Parse { line, .. } | ScenarioError::Unknown { line, .. } => Some(Place::Line(*line)),
+            ScenarioError::Field { place, .. } => Some(*place),
+            ScenarioError::Read { .. } => None,
+        }
+    }
 }
 
 /// Loop mode of the plant (DESIGN section 6).
@@ -346,7 +399,7 @@ impl Default for TrajectoryConfig {
     }
 }
 
-/// Controller gains. Zero for a force gain means "derive from the design rule" (issue 6).
+/// Controller gains (the force loop's follow from the design rule, controller::gains).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ControllerConfig {
@@ -411,21 +464,26 @@ impl Default for RecordingConfig {
 }
 
 impl Scenario {
-    /// Parse a scenario from TOML text; `path` is only used in error messages.
+    /// Parse a scenario from TOML text and check every field (`fields::FIELDS`); `path` is only
+    /// used in error messages.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, ScenarioError> {
+        let spans = check::walk(text, path)?;
         let s: Scenario = toml::from_str(text).map_err(|e| {
-            let (line, column) = e
-                .span()
-                .map(|sp| line_col(text, sp.start))
-                .unwrap_or((0, 0));
-            ScenarioError::Parse {
-                path: path.to_path_buf(),
-                line,
-                column,
-                message: e.message().to_string(),
+            // The walk checked every type the table knows; what serde still refuses (a count
+            // too large for its integer type) is named by the field whose value holds the span.
+            let at = e.span().and_then(|sp| spans.field_at(sp.start));
+            match at {
+                Some((field, line)) => ScenarioError::Field {
+                    path: path.to_path_buf(),
+                    place: Place::Line(line),
+                    field: field.to_string(),
+                    value: e.span().and_then(|sp| text.get(sp)).unwrap_or("?").trim().to_string(),
+                    why: e.message().trim().to_string(),
+                },
+                None => check::syntax_error(text, path, &e),
             }
         })?;
-        s.validate(path)?;
+        check::values(&s, path, Some(&spans))?;
         Ok(s)
     }
 
@@ -441,119 +499,11 @@ impl Scenario {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("default.toml")
     }
 
-    /// Range checks the type system cannot express.
+    /// Checks every value of a scenario built in code against `fields::FIELDS` (messages name
+    /// `path` and the field, no line).
     pub fn validate(&self, path: &Path) -> Result<(), ScenarioError> {
-        let bad = |field: &'static str, value: f64, why: &'static str| ScenarioError::Invalid {
-            path: path.to_path_buf(),
-            field: field.into(),
-            value: value.to_string(),
-            why,
-        };
-        let l = &self.loop_;
-        if !(l.period_s > 0.0 && l.period_s <= 0.1) {
-            return Err(bad("loop.period_s", l.period_s, "must be in (0, 0.1] s"));
-        }
-        if !(l.torque_budget_us > 0.0 && l.torque_budget_us < l.period_s * 1e6) {
-            return Err(bad("loop.torque_budget_us", l.torque_budget_us, "must be positive and shorter than the period"));
-        }
-        if !(l.spin_wait_us >= 0.0 && l.spin_wait_us <= l.torque_budget_us) {
-            return Err(bad("loop.spin_wait_us", l.spin_wait_us, "must be in [0, loop.torque_budget_us]"));
-        }
-        if !(l.controller_spin_us >= 0.0 && l.controller_spin_us < 0.5 * l.period_s * 1e6) {
-            return Err(bad("loop.controller_spin_us", l.controller_spin_us, "must be in [0, half the period)"));
-        }
-        if l.max_consecutive_misses == 0 {
-            return Err(bad("loop.max_consecutive_misses", 0.0, "must be at least 1"));
-        }
-        if !(l.lockstep_watchdog_s > 0.0) {
-            return Err(bad("loop.lockstep_watchdog_s", l.lockstep_watchdog_s, "must be positive"));
-        }
-        if !(l.duration_s >= 0.0 && l.duration_s.is_finite()) {
-            return Err(bad("loop.duration_s", l.duration_s, "must be finite and >= 0"));
-        }
-        if l.substeps == 0 || l.substeps > 1000 {
-            return Err(bad("loop.substeps", l.substeps as f64, "must be in 1..=1000"));
-        }
-        if !(self.robot.plant_inertia_scale > 0.0) {
-            return Err(bad("robot.plant_inertia_scale", self.robot.plant_inertia_scale, "must be positive"));
-        }
-        if !(self.robot.tool_mass_kg >= 0.0) {
-            return Err(bad("robot.tool_mass_kg", self.robot.tool_mass_kg, "must be >= 0"));
-        }
-        let s = &self.strip;
-        if !(s.length_mm >= 4.0) {
-            return Err(bad("strip.length_mm", s.length_mm, "must be at least 4 mm"));
-        }
-        if !(s.element_mm > 0.0 && s.element_mm <= 4.0) {
-            return Err(bad("strip.element_mm", s.element_mm, "must be in (0, 4] mm"));
-        }
-        if !(s.poisson > 0.0 && s.poisson < 0.5) {
-            return Err(bad("strip.poisson", s.poisson, "must be in (0, 0.5)"));
-        }
-        if s.boundary != "bonded" && s.boundary != "sliding" {
-            return Err(ScenarioError::Invalid {
-                path: path.to_path_buf(),
-                field: "strip.boundary".into(),
-                value: format!("{:?}", s.boundary),
-                why: "must be \"bonded\" or \"sliding\"",
-            });
-        }
-        let t = &self.trajectory;
-        if !(t.z_start_mm >= 0.0 && t.z_end_mm <= s.length_mm && t.z_start_mm < t.z_end_mm) {
-            return Err(bad("trajectory.z_end_mm", t.z_end_mm, "need 0 <= z_start_mm < z_end_mm <= strip.length_mm"));
-        }
-        if !(t.roll_s > 0.0) {
-            return Err(bad("trajectory.roll_s", t.roll_s, "must be positive"));
-        }
-        if t.force_ref_along_z.len() > MAX_FORCE_POINTS {
-            return Err(bad("trajectory.force_ref_along_z", t.force_ref_along_z.len() as f64, "too many points (at most 32)"));
-        }
-        for (i, w) in t.force_ref_along_z.iter().enumerate() {
-            let [z_mm, f_n] = *w;
-            let point = |which: &str, value: f64, why: &'static str| ScenarioError::Invalid {
-                path: path.to_path_buf(),
-                field: format!("trajectory.force_ref_along_z[{i}] {which}").into(),
-                value: value.to_string(),
-                why,
-            };
-            if !(z_mm >= 0.0 && z_mm <= s.length_mm) {
-                return Err(point("z_mm", z_mm, "must lie on the strip [0, strip.length_mm]"));
-            }
-            if i > 0 && !(z_mm > t.force_ref_along_z[i - 1][0]) {
-                return Err(point("z_mm", z_mm, "must be strictly ascending"));
-            }
-            if !(f_n.is_finite() && f_n < 0.0 && f_n > -100.0) {
-                return Err(point("force_n", f_n, "must press: in (-100, 0) N"));
-            }
-        }
-        if !(self.controller.strip_stiffness_n_per_m > 0.0 && self.controller.strip_stiffness_n_per_m.is_finite()) {
-            return Err(bad("controller.strip_stiffness_n_per_m", self.controller.strip_stiffness_n_per_m, "must be positive and finite"));
-        }
-        if l.takeover_after_misses == 0 {
-            return Err(bad("loop.takeover_after_misses", 0.0, "must be at least 1"));
-        }
-        if !(l.peer_stall_timeout_s > 0.0 && l.peer_stall_timeout_s.is_finite()) {
-            return Err(bad("loop.peer_stall_timeout_s", l.peer_stall_timeout_s, "must be positive and finite"));
-        }
-        let sf = &self.safety;
-        if !(sf.max_tcp_speed_mps > 0.0 && sf.max_tcp_speed_mps.is_finite()) {
-            return Err(bad("safety.max_tcp_speed_mps", sf.max_tcp_speed_mps, "must be positive and finite"));
-        }
-        if !(sf.max_contact_force_n > 0.0 && sf.max_contact_force_n.is_finite()) {
-            return Err(bad("safety.max_contact_force_n", sf.max_contact_force_n, "must be positive and finite"));
-        }
-        if !(self.recording.queue_capacity >= 16) {
-            return Err(bad("recording.queue_capacity", self.recording.queue_capacity as f64, "must be at least 16"));
-        }
-        Ok(())
+        check::values(self, path, None)
     }
-}
-
-fn line_col(text: &str, byte: usize) -> (usize, usize) {
-    let before = &text[..byte.min(text.len())];
-    let line = before.matches('\n').count() + 1;
-    let column = before.rfind('\n').map(|i| before.len() - i).unwrap_or(before.len() + 1);
-    (line, column)
 }
 
 #[cfg(test)]
@@ -633,6 +583,6 @@ mod tests {
         }
         let many: Vec<String> = (0..=MAX_FORCE_POINTS).map(|i| format!("[{i}, -10]")).collect();
         let e = Scenario::from_toml_str(&format!("[trajectory]\nforce_ref_along_z = [{}]\n", many.join(", ")), Path::new("t.toml")).unwrap_err().to_string();
-        assert!(e.contains("too many points"), "{e}");
+        assert!(e.contains("must have at most 32 points"), "{e}");
     }
 }

@@ -7,6 +7,7 @@
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 /// Directory holding the workspace binaries: the test executable lives in
@@ -206,6 +207,50 @@ impl TestRig {
     pub fn recording(&self) -> PathBuf {
         self.dir.join("run.mcap")
     }
+}
+
+/// One Python controller test at a time per test binary: each runs a lockstep plant and a Python
+/// controller, and two such pairs on the 2-CPU host would slow each other down.
+static PYTHON_SERIAL: Mutex<()> = Mutex::new(());
+
+/// True when `python3` imports `modules` (e.g. `"iceoryx2, numpy"`); otherwise prints
+/// `SKIP: <test>: ...` with the `pip install` line and the test should return (CI installs them).
+pub fn python_has(test: &str, modules: &str, pip: &str) -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", &format!("import {modules}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        println!("SKIP: {test}: python3 lacks {modules} (pip install {pip})");
+    }
+    ok
+}
+
+/// A lockstep rig running `duration_s` with the Python controller `script` (an executable file
+/// with a shebang, started as `script --rig NAME --scenario FILE` like `rig run` starts any
+/// controller), holding the Python serial lock; `None` (after a `SKIP:` line) when python3 lacks
+/// `modules`. `loop_extra`: more `[loop]` lines for the scenario (e.g. `"peer_stall_timeout_s = 0.3\n"`).
+pub fn python_rig(
+    test: &str,
+    tag: &str,
+    duration_s: f64,
+    script: &Path,
+    modules: &str,
+    pip: &str,
+    loop_extra: &str,
+) -> Option<(MutexGuard<'static, ()>, TestRig, Daemon, Daemon)> {
+    let g = PYTHON_SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !python_has(test, modules, pip) {
+        return None;
+    }
+    let mut t = TestRig::new(tag, "lockstep");
+    if !loop_extra.is_empty() {
+        t.scenario = write_scenario(&t.dir, "lockstep", loop_extra);
+    }
+    let plant = t.plant(duration_s);
+    let args = ["--rig", t.rig.as_str(), "--scenario", t.scenario.to_str().unwrap()];
+    let py = Daemon::start("python-controller", script, &args, &t.dir);
+    Some((g, t, plant, py))
 }
 
 /// "No torque jump": around a takeover the applied torque changes per tick by at most 2 % of each

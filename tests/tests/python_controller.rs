@@ -4,8 +4,7 @@
 //! (the tests print `SKIP:` and pass without them).
 
 use std::path::PathBuf;
-use std::process::Command;
-use std::sync::{Mutex, MutexGuard};
+use std::sync::MutexGuard;
 use std::time::Duration;
 
 use recordings::read::Recording;
@@ -13,45 +12,14 @@ use recordings::EventKind;
 use rig_tests::*;
 use robot::Vec6;
 
-static SERIAL: Mutex<()> = Mutex::new(());
-
-fn serial() -> MutexGuard<'static, ()> {
-    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
-}
-
 fn script() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples/python_controller/hold_controller.py")
 }
 
-/// True when python3 has the controller's modules; otherwise says `SKIP:` (CI installs them).
-fn python_ready(test: &str) -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import iceoryx2, pinocchio, numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        println!("SKIP: {test}: python3 lacks iceoryx2/pinocchio/numpy (pip install iceoryx2==0.10.0 pin numpy)");
-    }
-    ok
-}
-
-fn python_controller(t: &TestRig) -> Daemon {
-    let s = script();
-    let args = [s.to_str().unwrap(), "--rig", &t.rig, "--scenario", t.scenario.to_str().unwrap()];
-    Daemon::start("python-controller", std::path::Path::new("python3"), &args, &t.dir)
-}
-
-/// A lockstep rig running `duration_s` with the Python controller on it, holding the serial
-/// lock; `None` (after a `SKIP:` line) without the Python modules.
+/// A lockstep rig running `duration_s` with the Python hold controller on it (see
+/// [`rig_tests::python_rig`]); `None` without the Python modules.
 fn python_rig(test: &str, tag: &str, duration_s: f64) -> Option<(MutexGuard<'static, ()>, TestRig, Daemon, Daemon)> {
-    let g = serial();
-    if !python_ready(test) {
-        return None;
-    }
-    let t = TestRig::new(tag, "lockstep");
-    let plant = t.plant(duration_s);
-    let py = python_controller(&t);
-    Some((g, t, plant, py))
+    rig_tests::python_rig(test, tag, duration_s, &script(), "iceoryx2, pinocchio, numpy", "iceoryx2==0.10.0 pin numpy", "")
 }
 
 #[test]

@@ -1,0 +1,438 @@
+//! The one table of scenario fields: name, type, unit, valid range and meaning of every field a
+//! scenario file may set. Loading checks every value against it (`check`), `scenarios/README.md`
+//! lists it (`markdown_table`, kept current by a test), and the defaults come from
+//! `Scenario::default()` so that they cannot differ from what a file that is silent gets.
+//!
+//! Values are in the units the file uses (mm where the name says `_mm`, µs for `_us`).
+
+use crate::{Scenario, MAX_FORCE_POINTS, STRIP_TOP_HEIGHT_M};
+
+/// What a field holds in the file.
+#[derive(Debug, Clone, Copy)]
+pub enum Kind {
+    /// A number (TOML float or integer).
+    Float,
+    /// A whole number.
+    Int,
+    Bool,
+    /// Free text.
+    Text,
+    /// One of these strings.
+    Choice(&'static [&'static str]),
+    /// An array of exactly this many numbers, each within the field's range.
+    Floats(usize),
+    /// `[[z_mm, force_n], ...]`: at most `MAX_FORCE_POINTS` points, z strictly ascending.
+    Points { z: Range, force: Range },
+}
+
+/// One end of a valid range, in the field's unit.
+#[derive(Debug, Clone, Copy)]
+pub enum Limit {
+    Num(f64),
+    /// `factor` times another field's value (`key`).
+    Times(f64, &'static str),
+    /// `factor` divided by another field's value (`key`).
+    Over(f64, &'static str),
+}
+
+impl Limit {
+    /// The other field this limit depends on, if any.
+    pub fn depends_on(&self) -> Option<&'static str> {
+        match *self {
+            Limit::Num(_) => None,
+            Limit::Times(_, k) | Limit::Over(_, k) => Some(k),
+        }
+    }
+}
+
+/// One end of a range: the limit and whether it belongs to the range.
+#[derive(Debug, Clone, Copy)]
+pub struct End {
+    pub limit: Limit,
+    pub inclusive: bool,
+}
+
+/// A valid range; a missing end is unbounded (but every number must be finite).
+#[derive(Debug, Clone, Copy)]
+pub struct Range {
+    pub lo: Option<End>,
+    pub hi: Option<End>,
+}
+
+/// A condition on a field that a range cannot say (it involves several fields).
+#[derive(Debug, Clone, Copy)]
+pub struct Rule {
+    /// What must hold, worded to follow "must be" (the README and the error message say it).
+    pub text: &'static str,
+    /// Ok, or what the scenario has instead (its numbers, for the message).
+    pub check: fn(&Scenario) -> Result<(), String>,
+}
+
+/// One scenario field.
+#[derive(Debug, Clone, Copy)]
+pub struct Field {
+    /// `section.field` as in the file (`description` has no section).
+    pub key: &'static str,
+    pub kind: Kind,
+    /// Unit of the value in the file ("" for none).
+    pub unit: &'static str,
+    /// Valid range of a number, of each element of `Floats`; unused for other kinds.
+    pub range: Range,
+    pub rule: Option<Rule>,
+    pub meaning: &'static str,
+}
+
+impl Field {
+    /// The section (`loop`, ...), or "" for top-level fields.
+    pub fn section(&self) -> &'static str {
+        self.key.rsplit_once('.').map_or("", |(s, _)| s)
+    }
+
+    /// The name within the section.
+    pub fn name(&self) -> &'static str {
+        self.key.rsplit_once('.').map_or(self.key, |(_, n)| n)
+    }
+}
+
+const fn lo_in(x: f64) -> Option<End> {
+    Some(End { limit: Limit::Num(x), inclusive: true })
+}
+const fn lo_ex(x: f64) -> Option<End> {
+    Some(End { limit: Limit::Num(x), inclusive: false })
+}
+const fn hi_in(x: f64) -> Option<End> {
+    Some(End { limit: Limit::Num(x), inclusive: true })
+}
+const fn hi_ex(x: f64) -> Option<End> {
+    Some(End { limit: Limit::Num(x), inclusive: false })
+}
+const fn of(factor: f64, key: &'static str, inclusive: bool) -> Option<End> {
+    Some(End { limit: Limit::Times(factor, key), inclusive })
+}
+const fn per(factor: f64, key: &'static str, inclusive: bool) -> Option<End> {
+    Some(End { limit: Limit::Over(factor, key), inclusive })
+}
+const fn range(lo: Option<End>, hi: Option<End>) -> Range {
+    Range { lo, hi }
+}
+/// (0, ∞): lengths, durations, stiffnesses, gains that must act.
+const POSITIVE: Range = range(lo_ex(0.0), None);
+/// [0, ∞): waits that may be skipped, dampings and masses that may vanish.
+const NON_NEGATIVE: Range = range(lo_in(0.0), None);
+const ANY: Range = range(None, None);
+
+const fn num(key: &'static str, unit: &'static str, range: Range, meaning: &'static str) -> Field {
+    Field { key, kind: Kind::Float, unit, range, rule: None, meaning }
+}
+const fn int(key: &'static str, unit: &'static str, range: Range, meaning: &'static str) -> Field {
+    Field { key, kind: Kind::Int, unit, range, rule: None, meaning }
+}
+const fn flag(key: &'static str, meaning: &'static str) -> Field {
+    Field { key, kind: Kind::Bool, unit: "", range: ANY, rule: None, meaning }
+}
+const fn choice(key: &'static str, names: &'static [&'static str], meaning: &'static str) -> Field {
+    Field { key, kind: Kind::Choice(names), unit: "", range: ANY, rule: None, meaning }
+}
+const fn with_rule(f: Field, text: &'static str, check: fn(&Scenario) -> Result<(), String>) -> Field {
+    Field { rule: Some(Rule { text, check }), ..f }
+}
+
+/// A peak speed (mm/s) against the TCP speed reflex.
+fn below_tcp_limit(what: &str, peak_mm_s: f64, s: &Scenario) -> Result<(), String> {
+    let limit = 1e3 * s.safety.max_tcp_speed_mps;
+    if peak_mm_s < limit {
+        Ok(())
+    } else {
+        Err(format!("the {what} peaks at {} mm/s, the limit is {} mm/s", fmt_num(peak_mm_s), fmt_num(limit)))
+    }
+}
+
+/// The strip's height at its centre line, mm: a bulge may not reach it.
+const STRIP_TOP_MM: f64 = STRIP_TOP_HEIGHT_M * 1e3;
+/// Placement limit, m: beyond the IRB 2400's 1.55 m reach with margin.
+const REACH_M: f64 = 2.0;
+/// Peak speed of the rolling phase's cosine velocity profile (twice the mean), mm/s.
+fn roll_peak_speed_mm_s(s: &Scenario) -> f64 {
+    let t = &s.trajectory;
+    2.0 * (t.z_end_mm - t.z_start_mm) / t.roll_s
+}
+/// Peak speed of the lift-off's cosine blend over `lift_mm` (π/2 times the mean), mm/s.
+fn lift_peak_speed_mm_s(s: &Scenario) -> f64 {
+    let t = &s.trajectory;
+    std::f64::consts::FRAC_PI_2 * t.lift_mm / t.lift_s
+}
+
+/// Every field a scenario file may set, in the order of `scenarios/README.md`.
+pub static FIELDS: &[Field] = &[
+    Field { key: "description", kind: Kind::Text, unit: "", range: ANY, rule: None, meaning: "Free text shown in summaries and recorded in the MCAP metadata." },
+    // [loop]
+    choice("loop.mode", &["realtime", "lockstep"], "`realtime`: absolute deadlines, a torque budget per tick, misses held and counted. `lockstep`: the plant waits for every torque (with a watchdog), as fast as both processes allow; deterministic."),
+    num("loop.period_s", "s", range(lo_ex(0.0), hi_in(0.1)), "Control period."),
+    num("loop.torque_budget_us", "µs", range(lo_ex(0.0), of(1e6, "loop.period_s", false)), "Real-time mode: how long after publishing the state the plant waits for the torque."),
+    int("loop.max_consecutive_misses", "ticks", range(lo_in(1.0), hi_in(1000.0)), "Consecutive misses that trigger the safe stop (libfranka stops after 20)."),
+    num("loop.lockstep_watchdog_s", "s", range(lo_ex(0.0), hi_in(3600.0)), "Lockstep mode: how long the plant waits for one torque before declaring the controller dead."),
+    with_rule(
+        num("loop.duration_s", "s", NON_NEGATIVE, "Run length (`rig run --duration` overrides it); 0 = until the trajectory ends plus 0.2 s."),
+        "0 or at least loop.period_s",
+        |s| {
+            let l = &s.loop_;
+            if l.duration_s == 0.0 || l.duration_s >= l.period_s { Ok(()) } else { Err(format!("the period is {} s", fmt_num(l.period_s))) }
+        },
+    ),
+    int("loop.substeps", "", range(lo_in(1.0), hi_in(1000.0)), "Plant integration substeps per tick (robot integrator and strip ZOH steps)."),
+    choice("loop.integrator", &["midpoint", "rk4"], "Robot integrator per substep: explicit midpoint (2 forward-dynamics calls) or classic fourth-order Runge–Kutta (4 calls)."),
+    num("loop.safe_stop_damping_nms", "N m s/rad", POSITIVE, "Joint damping of the safe stop (gravity compensation plus this damping)."),
+    num("loop.takeover_blend_s", "s", NON_NEGATIVE, "How long the torque is blended from the held value to a new controller's value (0 = at once)."),
+    int("loop.takeover_after_misses", "ticks", range(lo_in(1.0), hi_in(1000.0)), "Consecutive missed ticks of the active controller after which another controller that is publishing may take over."),
+    num("loop.peer_stall_timeout_s", "s", range(lo_ex(0.0), hi_in(3600.0)), "How long a peer that is alive but silent is waited for before it is treated as dead (a stalled host or SIGSTOP is not a death)."),
+    num("loop.spin_wait_us", "µs", range(lo_in(0.0), of(1.0, "loop.torque_budget_us", true)), "Real-time mode: the plant busy-polls for the torque this long after publishing before it sleeps on the event (0 = never spin)."),
+    num("loop.controller_spin_us", "µs", range(lo_in(0.0), of(0.5e6, "loop.period_s", false)), "Real-time mode: the controller busy-polls from this long before the state is due until this long after (0 = always sleep on the event)."),
+    flag("loop.idle_poll", "Real-time mode: hold the kernel's PM QoS CPU latency request at 0 while the plant runs (needs root; refused requests are logged)."),
+    // [robot]
+    num("robot.tool_mass_kg", "kg", range(lo_in(0.0), hi_in(20.0)), "Mass of the applicator tool (bracket and wheel); at most the IRB 2400's 20 kg payload class."),
+    num("robot.tool_offset_m", "m", range(lo_ex(0.0), hi_in(0.5)), "Tool centre point (wheel centre) offset from the flange along the flange z axis."),
+    num("robot.wheel_radius_mm", "mm", range(lo_ex(0.0), hi_in(100.0)), "Applicator wheel radius."),
+    Field { key: "robot.armature_kgm2", kind: Kind::Floats(6), unit: "kg m²", range: NON_NEGATIVE, rule: None, meaning: "Reflected motor inertia per joint (6 values)." },
+    Field { key: "robot.viscous_nms", kind: Kind::Floats(6), unit: "N m s/rad", range: NON_NEGATIVE, rule: None, meaning: "Viscous joint friction per joint (6 values)." },
+    num("robot.plant_inertia_scale", "", range(lo_ex(0.0), hi_in(10.0)), "Scale of every link and tool mass and inertia in the plant against the controller's model (1 = exact model; robustness studies)."),
+    // [strip]
+    flag("strip.enabled", "`false` runs the robot alone (no strip, no contact)."),
+    num("strip.length_mm", "mm", range(lo_in(8.0), hi_ex(1000.0)), "Strip length along task z (at least two of the largest elements, under 1 m)."),
+    num("strip.element_mm", "mm", range(lo_in(0.2), hi_in(4.0)), "Target hexahedron edge of the mesh."),
+    num("strip.youngs_modulus_pa", "Pa", POSITIVE, "Young's modulus (the linearised Ogden fit of Section 4.1)."),
+    num("strip.poisson", "", range(lo_ex(0.0), hi_ex(0.5)), "Poisson's ratio (0.4999 as in the thesis works: mean dilatation)."),
+    num("strip.density_kg_m3", "kg/m³", POSITIVE, "Density (EPDM datasheet value)."),
+    int("strip.order", "states", range(lo_in(2.0), hi_in(10000.0)), "Reduced model order (balanced truncation; dense, so thousands of states are already slow to build)."),
+    choice("strip.boundary", &["bonded", "sliding"], "How the substrate holds the bottom face: `bonded` (all DOFs fixed) or `sliding` (normal fixed, frictionless in-plane)."),
+    num("strip.cutoff_hz", "Hz", POSITIVE, "Craig–Bampton fixed-interface mode cut-off."),
+    num("strip.damping_alpha", "1/s", NON_NEGATIVE, "Rayleigh damping B = alpha M + beta K (5.24): the mass factor."),
+    with_rule(
+        num("strip.damping_beta", "s", NON_NEGATIVE, "Rayleigh damping B = alpha M + beta K (5.24): the stiffness factor."),
+        "> 0 when strip.damping_alpha = 0 (balanced truncation needs a damped system)",
+        |s| if s.strip.damping_alpha > 0.0 || s.strip.damping_beta > 0.0 { Ok(()) } else { Err("strip.damping_alpha is 0 too".into()) },
+    ),
+    // [bulge]
+    num("bulge.height_mm", "mm", range(lo_ex(-STRIP_TOP_MM), hi_ex(STRIP_TOP_MM)), "Peak height of the raised-cosine bump of the substrate under the strip (negative: a dip); less than the strip's 8 mm height at its centre."),
+    num("bulge.half_width_mm", "mm", POSITIVE, "Half the bump's full width along the strip."),
+    num("bulge.center_mm", "mm", range(lo_in(0.0), of(1.0, "strip.length_mm", true)), "Position of the bump's peak along the strip."),
+    // [placement]
+    num("placement.table_z_m", "m", range(lo_in(-REACH_M), hi_in(REACH_M)), "Base z of the table top (strip bottom); within 2 m of the base (the arm reaches 1.55 m)."),
+    num("placement.strip_start_x_m", "m", range(lo_in(-REACH_M), hi_in(REACH_M)), "Base x of the strip's start (task z = 0)."),
+    num("placement.strip_y_m", "m", range(lo_in(-REACH_M), hi_in(REACH_M)), "Base y of the strip's centre line (task x = 0)."),
+    // [contact]
+    num("contact.stiffness_n_per_m", "N/m", POSITIVE, "Wheel–strip penalty stiffness (unilateral)."),
+    num("contact.damping_ns_per_m", "N s/m", NON_NEGATIVE, "Wheel–strip penalty damping."),
+    // [trajectory]
+    num("trajectory.approach_height_mm", "mm", range(lo_ex(0.0), hi_in(100.0)), "Start height of the wheel's lowest point above the undeformed strip top."),
+    num("trajectory.settle_s", "s", NON_NEGATIVE, "Time to hold the start pose before moving (`rig timing` holds for the whole run with 1e6)."),
+    num("trajectory.approach_speed_mm_s", "mm/s", range(lo_ex(0.0), of(1e3, "safety.max_tcp_speed_mps", false)), "Approach speed towards the strip until contact is detected; below the TCP speed reflex."),
+    num("trajectory.contact_threshold_n", "N", range(lo_ex(0.0), of(1.0, "safety.max_contact_force_n", false)), "Contact detection threshold on the force magnitude."),
+    num("trajectory.force_ref_n", "N", range(of(-1.0, "safety.max_contact_force_n", false), hi_ex(0.0)), "Force set-point on the strip while rolling (negative = pressing, thesis sign); inside the contact force reflex."),
+    Field {
+        key: "trajectory.force_ref_along_z",
+        kind: Kind::Points {
+            z: range(lo_in(0.0), of(1.0, "strip.length_mm", true)),
+            force: range(of(-1.0, "safety.max_contact_force_n", false), hi_ex(0.0)),
+        },
+        unit: "mm, N",
+        range: ANY,
+        rule: None,
+        meaning: "Optional force set-point along the strip, linear in between and held beyond the ends; replaces force_ref_n from the force ramp to the ramp-down.",
+    },
+    num("trajectory.force_ramp_s", "s", POSITIVE, "Force ramp time (cosine blend from the contact force to the set-point)."),
+    num("trajectory.dwell_s", "s", NON_NEGATIVE, "Dwell at full force before rolling."),
+    num("trajectory.z_start_mm", "mm", range(lo_in(0.0), of(1.0, "trajectory.z_end_mm", false)), "Wheel position along the strip where rolling starts."),
+    num("trajectory.z_end_mm", "mm", range(of(1.0, "trajectory.z_start_mm", false), of(1.0, "strip.length_mm", true)), "Wheel position along the strip where rolling ends."),
+    with_rule(
+        num("trajectory.roll_s", "s", POSITIVE, "Rolling time with the cosine velocity profile."),
+        "long enough for a peak rolling speed 2 (z_end_mm - z_start_mm) / roll_s below 1e3 safety.max_tcp_speed_mps (mm/s)",
+        |s| below_tcp_limit("roll", roll_peak_speed_mm_s(s), s),
+    ),
+    num("trajectory.ramp_down_s", "s", POSITIVE, "Force ramp-down time after rolling."),
+    num("trajectory.lift_mm", "mm", range(lo_ex(0.0), hi_in(100.0)), "Lift-off height above the strip after the ramp-down."),
+    with_rule(
+        num("trajectory.lift_s", "s", POSITIVE, "Lift-off time (cosine blend)."),
+        "long enough for a peak lift-off speed π lift_mm / (2 lift_s) below 1e3 safety.max_tcp_speed_mps (mm/s)",
+        |s| below_tcp_limit("lift-off", lift_peak_speed_mm_s(s), s),
+    ),
+    // [controller]
+    num("controller.force_crossover_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Desired crossover of the force loop (Section 6.2: about 25 Hz); below the Nyquist frequency."),
+    flag("controller.force_integral", "Integral action on the force error (the thesis has none)."),
+    num("controller.force_integral_ratio", "", range(lo_ex(0.0), hi_in(1.0)), "Integral gain relative to the crossover: ki = ratio 2π f_c (at most 1: the integral costs at most 45° of phase margin)."),
+    num("controller.force_integral_limit_n", "N", range(lo_ex(0.0), of(1.0, "safety.max_contact_force_n", true)), "Anti-windup clamp on the integral's contribution."),
+    flag("controller.force_rate_feedforward", "Feed the force set-point's rate forward as the wheel velocity the strip's stiffness asks for (the thesis has none)."),
+    num("controller.motion_bandwidth_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Translational PD bandwidth (the five motion directions); below the Nyquist frequency."),
+    num("controller.motion_damping_ratio", "", range(lo_ex(0.0), hi_in(10.0)), "Damping ratio of the translational and rotational PD."),
+    num("controller.rotation_bandwidth_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Rotational PD bandwidth; below the Nyquist frequency."),
+    num("controller.joint_damping_nms", "N m s/rad", NON_NEGATIVE, "Joint-space damping added to the control torque (small, for the wrist)."),
+    num("controller.strip_stiffness_n_per_m", "N/m", POSITIVE, "Driving-point stiffness of the strip under the wheel, the force-loop design rule's plant (`rig design` reports it for a model)."),
+    // [recording]
+    flag("recording.enabled", "Record the run to MCAP."),
+    int("recording.queue_capacity", "records", range(lo_in(16.0), hi_in(1048576.0)), "Bounded queue between the loop thread and the writer thread."),
+    int("recording.chunk_size_bytes", "bytes", range(lo_in(1024.0), hi_in(1073741824.0)), "MCAP chunk size bound (a killed run loses at most the open chunk)."),
+    // [safety]
+    num("safety.max_tcp_speed_mps", "m/s", POSITIVE, "Reflex: TCP speed limit (ISO 10218-1's reduced speed, 0.25 m/s, by default); crossing it stops the plant at once."),
+    num("safety.max_contact_force_n", "N", POSITIVE, "Reflex: limit on the magnitude of the wheel–strip force; crossing it stops the plant at once."),
+];
+
+/// The field called `key` (`section.field`).
+pub fn field(key: &str) -> Option<&'static Field> {
+    FIELDS.iter().find(|f| f.key == key)
+}
+
+/// The sections of the table, in order ("" for top-level fields).
+pub fn sections() -> Vec<&'static str> {
+    let mut out: Vec<&'static str> = Vec::new();
+    for f in FIELDS {
+        if !out.contains(&f.section()) {
+            out.push(f.section());
+        }
+    }
+    out
+}
+
+/// The field names of one section, for "did you mean" lists.
+pub fn names_in(section: &str) -> Vec<&'static str> {
+    FIELDS.iter().filter(|f| f.section() == section).map(|f| f.name()).collect()
+}
+
+/// A number as the messages and the README print it: plain, or with an exponent where that is
+/// shorter for a very large or small number (1e6, 3e-6; but 1000, 0.001, 524288).
+pub fn fmt_num(x: f64) -> String {
+    let plain = format!("{x}");
+    let exp = format!("{x:e}");
+    if x.is_finite() && (x.abs() >= 1e5 || (x != 0.0 && x.abs() < 1e-3)) && exp.len() < plain.len() {
+        exp
+    } else {
+        plain
+    }
+}
+
+fn fmt_limit(l: Limit) -> String {
+    match l {
+        Limit::Num(x) => fmt_num(x),
+        Limit::Times(1.0, k) => k.to_string(),
+        Limit::Times(-1.0, k) => format!("-{k}"),
+        Limit::Times(f, k) => format!("{} {k}", fmt_num(f)),
+        Limit::Over(f, k) => format!("{} / {k}", fmt_num(f)),
+    }
+}
+
+impl Range {
+    /// `(0, 0.1]`, `[0, ∞)`, `(0, 1e6 loop.period_s)`: the README's and the messages' form.
+    pub fn text(&self) -> String {
+        self.render(fmt_limit)
+    }
+
+    fn render(&self, limit: impl Fn(Limit) -> String) -> String {
+        let lo = match self.lo {
+            Some(e) => format!("{}{}", if e.inclusive { "[" } else { "(" }, limit(e.limit)),
+            None => "(-∞".into(),
+        };
+        let hi = match self.hi {
+            Some(e) => format!("{}{}", limit(e.limit), if e.inclusive { "]" } else { ")" }),
+            None => "∞)".into(),
+        };
+        format!("{lo}, {hi}")
+    }
+
+    /// Whether any end depends on another field.
+    pub fn is_relative(&self) -> bool {
+        [self.lo, self.hi].iter().flatten().any(|e| e.limit.depends_on().is_some())
+    }
+
+    /// The range with every limit evaluated (`value` gives another field's value).
+    pub fn resolved_text(&self, value: &dyn Fn(&str) -> f64) -> String {
+        self.render(|l| fmt_num(resolve(l, value)))
+    }
+
+    /// Whether `x` lies in the range. Only the constant ends are checked when `value` is None
+    /// (the first pass, before the fields that other ranges depend on are known to be valid).
+    pub fn contains(&self, x: f64, value: Option<&dyn Fn(&str) -> f64>) -> bool {
+        let end = |e: &Option<End>, above: bool| match e {
+            None => true,
+            Some(e) => {
+                let b = match (e.limit, value) {
+                    (Limit::Num(b), _) => b,
+                    (l, Some(v)) => resolve(l, v),
+                    (_, None) => return true,
+                };
+                match (above, e.inclusive) {
+                    (true, true) => x >= b,
+                    (true, false) => x > b,
+                    (false, true) => x <= b,
+                    (false, false) => x < b,
+                }
+            }
+        };
+        x.is_finite() && end(&self.lo, true) && end(&self.hi, false)
+    }
+}
+
+fn resolve(l: Limit, value: &dyn Fn(&str) -> f64) -> f64 {
+    match l {
+        Limit::Num(x) => x,
+        Limit::Times(f, k) => f * value(k),
+        Limit::Over(f, k) => f / value(k),
+    }
+}
+
+impl Kind {
+    /// What the README's type column says.
+    pub fn text(&self) -> String {
+        match self {
+            Kind::Float => "number".into(),
+            Kind::Int => "whole number".into(),
+            Kind::Bool => "true or false".into(),
+            Kind::Text => "string".into(),
+            Kind::Choice(_) => "string".into(),
+            Kind::Floats(n) => format!("{n} numbers"),
+            Kind::Points { .. } => "`[[z_mm, force_n], ...]`".into(),
+        }
+    }
+}
+
+impl Field {
+    /// The valid range as the README says it (rule included).
+    pub fn valid_text(&self) -> String {
+        let base = match self.kind {
+            Kind::Float | Kind::Int => self.range.text(),
+            Kind::Floats(_) => format!("each in {}", self.range.text()),
+            Kind::Bool | Kind::Text => "any".into(),
+            Kind::Choice(names) => format!("one of {}", names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")),
+            Kind::Points { z, force } => format!(
+                "at most {MAX_FORCE_POINTS} points; z_mm in {}, strictly ascending; force_n in {}",
+                z.text(),
+                force.text()
+            ),
+        };
+        match self.rule {
+            Some(r) => format!("{base}; {}", r.text),
+            None => base,
+        }
+    }
+}
+
+/// The README's field table (markdown), defaults from `Scenario::default()`.
+pub fn markdown_table() -> String {
+    let defaults = toml::Table::try_from(Scenario::default()).expect("the default scenario serialises");
+    let mut s = String::from("| field | type | unit | default | valid range | meaning |\n| --- | --- | --- | --- | --- | --- |\n");
+    for f in FIELDS {
+        let default = crate::check::lookup(&defaults, f.key).map_or_else(|| "—".into(), fmt_value);
+        let unit = if f.unit.is_empty() { "—" } else { f.unit };
+        s += &format!("| `{}` | {} | {unit} | `{default}` | {} | {} |\n", f.key, f.kind.text(), f.valid_text(), f.meaning);
+    }
+    s
+}
+
+/// A TOML value as the README and the messages print it.
+pub fn fmt_value(v: &toml::Value) -> String {
+    match v {
+        toml::Value::Float(x) => fmt_num(*x),
+        toml::Value::Integer(i) => i.to_string(),
+        toml::Value::String(s) => format!("{s:?}"),
+        toml::Value::Boolean(b) => b.to_string(),
+        toml::Value::Array(a) => format!("[{}]", a.iter().map(fmt_value).collect::<Vec<_>>().join(", ")),
+        other => other.to_string(),
+    }
+}
