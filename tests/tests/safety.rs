@@ -568,6 +568,19 @@ fn a_controller_stopped_for_200_ms_during_the_roll_resumes_bumplessly() {
             c.check(*k >= g && *k <= g + 50, || format!("safe stop cleared at tick {k}, first good answer at {g}"));
             let (step, at, j) = largest_step(&rec, g, k + 300);
             eprintln!("largest applied-torque step from the first good answer to 300 ms after the clear: {step:.3} N m on joint {j} at tick {at}");
+            // Where it happens: the torque on that joint, the contact, force control.
+            for k in at.saturating_sub(3)..=at + 2 {
+                let tau = rec.joint_torque.iter().find(|r| r.tick == k).map_or(f64::NAN, |r| r.torque.tau[j - 1]);
+                let st = rec.joint_state.iter().find(|s| s.tick == k);
+                let contact = st.is_some_and(|s| s.flags & state_flags::IN_CONTACT != 0);
+                let strip = rec.strip.iter().find(|s| s.tick == k);
+                let fc = rec.controller.iter().find(|d| d.tick == k).map(|d| d.force_control_active);
+                eprintln!(
+                    "  tick {k}: tau{j} {tau:.2} N m, in contact {contact}, contact force {:.2} N, wheel z {:.2} mm, force control {fc:?}",
+                    strip.map_or(f64::NAN, |s| s.contact_force_n),
+                    strip.map_or(f64::NAN, |s| s.wheel_z_m * 1e3)
+                );
+            }
             c.check(step <= 5.0, || format!("applied torque steps {step:.3} N m on joint {j} at tick {at} after resumption"));
         }
         other => c.check(false, || format!("no resumption after the stall (first good answer, clear): {other:?}")),
