@@ -338,6 +338,41 @@ fn a_stranger_on_the_torque_service_moves_nothing_and_is_recorded_once() {
     c.done();
 }
 
+/// Lockstep, robot only: the same hold run with and without a stranger. The lockstep plant waits
+/// for the active controller's answer each tick and ignores the stranger's, so the stranger moves
+/// nothing at all: the two recordings' states and applied torques are bit-identical, and the
+/// stranger, whose answers the plant did see, is recorded once.
+#[test]
+fn in_lockstep_a_stranger_changes_not_one_bit() {
+    let _g = serial();
+    let run = |tag: &str, with_stranger: bool| {
+        let t = TestRig::new(tag, "lockstep");
+        let mut plant = t.plant(10.0);
+        let mut hold = t.controller("hold", "hold-controller", &[]);
+        let mut stranger = with_stranger.then(|| t.controller("stranger", "fault-controller", &["--stranger", "--stranger-after", "100"]));
+        assert!(plant.expect_exit(LONG).success(), "plant: {}", plant.stderr());
+        assert!(hold.expect_exit(Duration::from_secs(10)).success(), "hold-controller: {}", hold.stderr());
+        if let Some(s) = stranger.as_mut() {
+            s.expect_exit(Duration::from_secs(10));
+        }
+        (Recording::open_complete(t.recording()).unwrap(), plant_summary(&plant))
+    };
+    let (alone, _) = run("lone", false);
+    let (with, summary) = run("crowd", true);
+    let foreign = events(&with, EventKind::ForeignTorque);
+    eprintln!("the plant ignored {} of the stranger's answers; foreign torque events {foreign:?}", summary["foreign_answers"]);
+    assert_eq!(alone.joint_state.len(), with.joint_state.len());
+    let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for (a, b) in alone.joint_state.iter().zip(&with.joint_state) {
+        assert_eq!((bits(&a.q), bits(&a.qd)), (bits(&b.q), bits(&b.qd)), "state of tick {} differs", a.tick);
+    }
+    for (a, b) in alone.joint_torque.iter().zip(&with.joint_torque) {
+        assert_eq!(bits(&a.torque.tau), bits(&b.torque.tau), "applied torque of tick {} differs", a.tick);
+    }
+    assert!(summary["foreign_answers"].as_u64().unwrap_or(0) > 0, "the stranger's answers never reached the plant: {}", summary["foreign_answers"]);
+    assert_eq!(foreign.len(), 1, "{foreign:?}");
+}
+
 // ---------------------------------------------------------------------------------------------
 // rig run's exit status
 
@@ -531,6 +566,7 @@ fn default_scenario() -> PathBuf {
 /// without its force law wound up: the safe stop clears within 50 ms of the first good answer,
 /// no torque is refused, and the applied torque steps by at most 5 N m per tick from then on
 /// (over the 300 ms after the safe stop clears).
+// needs the controller changes
 #[test]
 fn a_controller_stopped_for_200_ms_during_the_roll_resumes_bumplessly() {
     let _g = serial();
@@ -591,6 +627,7 @@ fn a_controller_stopped_for_200_ms_during_the_roll_resumes_bumplessly() {
 /// Needs the controller changes (bumpless entry into force control). The default scenario in
 /// lockstep: the largest per-tick change of any applied joint torque over the whole run is at
 /// most 15 N m (issue 11: 404 N m at force-control onset before).
+// needs the controller changes
 #[test]
 fn the_default_lockstep_run_has_no_torque_step_above_15_nm() {
     let _g = serial();
@@ -611,6 +648,7 @@ fn the_default_lockstep_run_has_no_torque_step_above_15_nm() {
 /// is stopped (SIGSTOP) for 300 ms, then continued. The controller must wait for it (a silent
 /// living peer is waited for up to `loop.peer_stall_timeout_s`, 5 s) and the run completes: the
 /// plant reaches its end and the controller exits 0 after the plant's goodbye.
+// needs the controller changes
 #[test]
 fn a_plant_stopped_for_300_ms_does_not_end_the_controller() {
     let _g = serial();
