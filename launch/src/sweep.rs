@@ -276,7 +276,7 @@ mod tests {
         let t = table(&[clean.clone(), stopped.clone()]);
         assert!(t.contains("| a.x=1 | 0 | 0 |"), "{t}");
         assert!(t.contains("| a.x=2 | 4: 1 reflex (first at tick 512), 1 safe stop (first at tick 512) | 0 |"), "{t}");
-        assert_eq!(sweep_exit_code(&[clean.clone()]), 0);
+        assert_eq!(sweep_exit_code(std::slice::from_ref(&clean)), 0);
         assert_eq!(sweep_exit_code(&[clean.clone(), stopped.clone()]), 4);
         assert_eq!(sweep_exit_code(&[stopped, result("a.x=3", 3, "controller failed: x")]), 1);
     }
