@@ -342,6 +342,13 @@ fn a_stranger_on_the_torque_service_moves_nothing_and_is_recorded_once() {
 /// for the active controller's answer each tick and ignores the stranger's, so the stranger moves
 /// nothing at all: the two recordings' states and applied torques are bit-identical, and the
 /// stranger, whose answers the plant did see, is recorded once.
+///
+/// Fails about 1 run in 10 on this host, from a defect below the test: now and then, mid-run, no
+/// torque publisher's `torque_ready` notification reaches the lockstep plant any more (the
+/// notifiers send nothing, a freshly started one neither, while the plant's listener socket and
+/// port tag still exist), so every tick waits the 2 s watchdog and `hold-controller` gives up after
+/// 100 ms of silence. Seen with `hold-controller` + `fault-controller` (with or without its peer
+/// watch), not in 30 runs of two `hold-controller`s.
 #[test]
 fn in_lockstep_a_stranger_changes_not_one_bit() {
     let _g = serial();
