@@ -81,10 +81,22 @@ impl Outcome {
 /// SIGTERM: it enters the safe stop and records the event within a tick or two.
 const CONTROLLER_END_GRACE: Duration = Duration::from_millis(100);
 
+/// True when process `pid` catches `sig` (`SigCgt` in /proc/PID/status).
+fn catches_signal(pid: u32, sig: i32) -> bool {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("SigCgt:"))
+        .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
+        .is_some_and(|mask| mask & (1u64 << (sig - 1)) != 0)
+}
+
 /// Tell the plant that the controller process ended (`sigqueue(SIGUSR1)` with
 /// `plant_sim::rt::encode_controller_end` as the value, which `plant_sim::rt` reads from
 /// `si_value.sival_ptr`): it enters the safe stop and records "controller process ended (...)".
-fn report_controller_end(plant: &Child, status: ExitStatus) {
+/// Not before the plant has installed its handler (a SIGUSR1 would kill it): a plant still starting
+/// up has no loop to safe-stop. Returns whether the plant was told.
+fn report_controller_end(plant: &Child, status: ExitStatus) -> bool {
     use plant_sim::rt::{encode_controller_end, ControllerEnd};
     use std::os::unix::process::ExitStatusExt;
     let end = match (status.code(), status.signal()) {
@@ -92,12 +104,17 @@ fn report_controller_end(plant: &Child, status: ExitStatus) {
         (None, Some(s)) => ControllerEnd::Signal(s),
         _ => ControllerEnd::Unknown,
     };
-    let Some(pid) = plant.id() else { return };
+    let Some(pid) = plant.id() else { return false };
+    if !catches_signal(pid, libc::SIGUSR1) {
+        return false;
+    }
     let value = libc::sigval { sival_ptr: encode_controller_end(end) as isize as usize as *mut libc::c_void };
     // SAFETY: queueing a signal to our own child, which is not reaped yet (its pid is ours).
     if unsafe { libc::sigqueue(pid as i32, libc::SIGUSR1, value) } != 0 {
         tracing::warn!("could not tell plant-sim that the controller ended: {}", std::io::Error::last_os_error());
+        return false;
     }
+    true
 }
 
 /// Unique rig name for this process: `r<pid>-<nanoseconds>`.
@@ -223,6 +240,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     let mut sigint = signal(SignalKind::interrupt())?;
     let mut sigterm = signal(SignalKind::terminate())?;
     let mut controller_exited_first = false;
+    let mut plant_told = false;
     let ending = tokio::select! {
         biased;
         s = plant.wait() => {
@@ -247,7 +265,8 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             // the plant (safe stop, an /events entry; harmless once its loop is over), give it
             // 100 ms, stop it (it finalises its recording). Whether the plant had reached its end
             // is read from its summary below.
-            report_controller_end(&plant, c);
+            let told = report_controller_end(&plant, c);
+            plant_told = told;
             let p = match tokio::time::timeout(CONTROLLER_END_GRACE, plant.wait()).await {
                 Ok(Ok(s)) => Some(s),
                 _ => stop(&mut plant, Duration::from_secs(10)).await,
@@ -257,10 +276,11 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
                 Ending::Completed
             } else {
                 Ending::ControllerFailed(format!(
-                "controller ended early with {}; plant told (safe stop), then stopped cleanly ({})",
-                describe(c),
-                p.map_or("not reaped".to_string(), describe)
-            ))
+                    "controller ended early with {}; plant {}stopped ({})",
+                    describe(c),
+                    if told { "told (SIGUSR1), then " } else { "" },
+                    p.map_or("not reaped".to_string(), describe)
+                ))
             }
         }
         _ = sigint.recv() => {
@@ -280,9 +300,10 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     // controller exited first, or somebody else stopped it.
     let stopped_by_signal = plant_summary.as_ref().and_then(|v| v.get("stopped_by_signal")).and_then(serde_json::Value::as_bool);
     let ending = match ending {
-        Ending::Completed if stopped_by_signal != Some(false) && controller_exited_first => Ending::ControllerFailed(
-            "controller exited 0 before the plant reached its end; plant told (safe stop), then stopped cleanly".into(),
-        ),
+        Ending::Completed if stopped_by_signal != Some(false) && controller_exited_first => Ending::ControllerFailed(format!(
+            "controller exited 0 before the plant reached its end; plant {}stopped",
+            if plant_told { "told (SIGUSR1), then " } else { "" }
+        )),
         Ending::Completed if stopped_by_signal == Some(true) => {
             Ending::PlantFailed("plant-sim was stopped by a signal (not from rig) before the end of the run".into())
         }
