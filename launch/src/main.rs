@@ -275,10 +275,14 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
     match &outcome.ending {
         Ending::Completed => {}
         Ending::Interrupted => eprintln!("rig: interrupted; both daemons stopped"),
+        Ending::Terminated => eprintln!("rig: terminated; both daemons stopped"),
         Ending::PlantFailed(why) => eprintln!("rig: PLANT FAILED: {why}"),
         Ending::ControllerFailed(why) => eprintln!("rig: CONTROLLER FAILED: {why}"),
     }
-    Ok(outcome.ending.exit_code())
+    // The summary's last line: the exit status and why (README, "Exit status").
+    let code = outcome.exit_code();
+    println!("{}", summary::status_line(code, &outcome.ending, outcome.plant_summary.as_ref()));
+    Ok(code)
 }
 
 /// The timing scenario: the default one without the strip, holding the start pose (no approach),
@@ -316,7 +320,9 @@ fn timing_scenario(dir: &Path, a: &TimingArgs) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
-/// `rig sweep`: every case in lockstep, then the table; exit 0 only if every case completed.
+/// `rig sweep`: every case in lockstep, then the table; exit 0 only if every case is clean, 4 if
+/// every case reached its end but some with a safe stop, reflex, refused torque or an incomplete
+/// recording, 1 if a case failed, 130/143 if the sweep was interrupted.
 fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
     let base_path = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
     let base = sweep::load_base(&base_path)?;
@@ -338,11 +344,19 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
     }
     let rt = runtime()?;
     let mut results = Vec::with_capacity(cases.len());
+    let mut interrupted = None;
     for (n, (case_dir, path, label)) in planned.into_iter().enumerate() {
         let mut l = prepare(supervise::unique_rig_name(), path.clone(), Some("lockstep".into()), ("--duration", a.launch.duration), Some(case_dir), a.launch.controller.clone())?;
         l.quiet = true;
         eprintln!("rig sweep: case {}/{}: {label}", n + 1, cases.len());
         let outcome = rt.block_on(supervise::supervise(&l))?;
+        let exit_code = outcome.exit_code();
+        let line = summary::status_line(exit_code, &outcome.ending, outcome.plant_summary.as_ref());
+        let status = line.split_once(": ").and_then(|(_, rest)| rest.split_once(": ")).map_or(line.clone(), |(_, why)| why.to_string());
+        if exit_code != 0 {
+            eprintln!("rig sweep: case {}/{}: {line}", n + 1, cases.len());
+        }
+        let stopped = matches!(outcome.ending, Ending::Interrupted | Ending::Terminated);
         let summary = outcome.plant_summary.as_ref();
         let numbers = recordings::cli::summary_numbers(&l.recording).ok();
         let rolling = numbers.as_ref().and_then(|n| n.rolling.clone());
@@ -350,7 +364,8 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
             label,
             scenario: path,
             recording: l.recording.clone(),
-            exit_code: outcome.ending.exit_code(),
+            exit_code,
+            status,
             misses: summary.and_then(|v| v.get("misses")).and_then(serde_json::Value::as_u64),
             safe_stops: summary.and_then(|v| v.get("safe_stops")).and_then(serde_json::Value::as_u64),
             force_error_max_n: rolling.as_ref().and_then(|r| r.force_error_max_abs_n),
@@ -359,12 +374,18 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
             bond_weakest_pa: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[0]),
             bond_weakest_z_m: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[1]),
         });
+        if stopped {
+            // Ctrl-C or SIGTERM stops the whole sweep, not just this case.
+            eprintln!("rig sweep: stopped after case {}/{}", n + 1, cases.len());
+            interrupted = Some(exit_code);
+            break;
+        }
     }
     print!("{}", sweep::table(&results));
     let json = dir.join("sweep.json");
     std::fs::write(&json, serde_json::to_string_pretty(&results)?).with_context(|| format!("writing {}", json.display()))?;
     println!("cases, recordings and {} in {}", json.file_name().unwrap_or_default().to_string_lossy(), dir.display());
-    Ok(if results.iter().all(|r| r.exit_code == 0) { 0 } else { 1 })
+    Ok(interrupted.unwrap_or_else(|| sweep::sweep_exit_code(&results)))
 }
 
 fn main() {

@@ -57,6 +57,57 @@ pub fn recording_summary(v: &Value, numbers: Option<&ReportNumbers>) -> String {
     s
 }
 
+fn plural(n: u64, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}
+
+/// What keeps a run that reached its end from exit status 0, from the plant's summary: reflexes,
+/// safe stops, refused torques (each with its count and first tick), a recording stopped early
+/// (`recording_stopped_early`: its reason, absent or null when complete) or with ticks the
+/// recorder dropped. Misses alone are not incidents (real time on a noisy host).
+pub fn incidents(v: &Value) -> Vec<String> {
+    let mut out = Vec::new();
+    let first = |key: &str| v.get(key).and_then(Value::as_u64).map_or(String::new(), |k| format!(" (first at tick {k})"));
+    for (count, first_key, one, many) in [
+        ("reflexes", "first_reflex_tick", "reflex", "reflexes"),
+        ("safe_stops", "first_safe_stop_tick", "safe stop", "safe stops"),
+        ("refusals", "first_refusal_tick", "refused torque", "refused torques"),
+    ] {
+        let n = int(v, count);
+        if n > 0 {
+            out.push(format!("{}{}", plural(n, one, many), first(first_key)));
+        }
+    }
+    match v.get("recording_stopped_early") {
+        None | Some(Value::Null) => {}
+        Some(Value::String(why)) => out.push(format!("recording stopped early ({why})")),
+        Some(other) => out.push(format!("recording stopped early ({other})")),
+    }
+    let drops = int(v, "drops");
+    if drops > 0 {
+        out.push(format!("recording incomplete ({} dropped by the recorder)", plural(drops, "tick", "ticks")));
+    }
+    out
+}
+
+/// The last line of `rig run`'s summary: the exit status and why.
+pub fn status_line(code: i32, ending: &crate::supervise::Ending, plant_summary: Option<&Value>) -> String {
+    use crate::supervise::Ending;
+    let found = plant_summary.map(incidents).unwrap_or_default();
+    let also = if found.is_empty() { String::new() } else { format!("; plant: {}", found.join(", ")) };
+    match ending {
+        Ending::Completed if plant_summary.is_none() => format!("rig: exit {code}: reached the end, but the plant printed no summary to tell how"),
+        Ending::Completed if found.is_empty() => {
+            format!("rig: exit {code}: reached the end; no safe stop, reflex or refused torque; recording complete")
+        }
+        Ending::Completed => format!("rig: exit {code}: {}", found.join(", ")),
+        Ending::PlantFailed(why) => format!("rig: exit {code}: plant failed: {why}{also}"),
+        Ending::ControllerFailed(why) => format!("rig: exit {code}: controller failed: {why}{also}"),
+        Ending::Interrupted => format!("rig: exit {code}: interrupted (SIGINT), both daemons stopped{also}"),
+        Ending::Terminated => format!("rig: exit {code}: terminated (SIGTERM), both daemons stopped{also}"),
+    }
+}
+
 /// One distribution line: p50/p90/p99/p99.9/max in µs.
 fn dist_line(name: &str, d: &Value) -> String {
     format!(
@@ -157,6 +208,42 @@ mod tests {
         let v = serde_json::json!({"recording": "runs/x/run.mcap", "recording_stopped_early": null});
         let s = recording_summary(&v, Some(&complete));
         assert!(!s.contains("early") && s.starts_with("recording   runs/x/run.mcap\n"), "{s}");
+    }
+
+    #[test]
+    fn incidents_name_counts_and_first_ticks_and_misses_alone_are_none() {
+        let clean = serde_json::json!({"misses": 40, "safe_stops": 0, "reflexes": 0, "refusals": 0, "drops": 0, "recording_stopped_early": null});
+        assert!(incidents(&clean).is_empty());
+        // An older plant without the new fields: nothing to report either.
+        assert!(incidents(&serde_json::json!({"misses": 3})).is_empty());
+        let v = serde_json::json!({"safe_stops": 1, "first_safe_stop_tick": 512, "reflexes": 1, "first_reflex_tick": 512,
+            "refusals": 200, "first_refusal_tick": 100, "recording_stopped_early": "disk full", "drops": 1});
+        assert_eq!(
+            incidents(&v),
+            [
+                "1 reflex (first at tick 512)",
+                "1 safe stop (first at tick 512)",
+                "200 refused torques (first at tick 100)",
+                "recording stopped early (disk full)",
+                "recording incomplete (1 tick dropped by the recorder)"
+            ]
+        );
+        let line = status_line(4, &crate::supervise::Ending::Completed, Some(&serde_json::json!({"reflexes": 2, "first_reflex_tick": 7})));
+        assert_eq!(line, "rig: exit 4: 2 reflexes (first at tick 7)");
+    }
+
+    #[test]
+    fn exit_status_is_0_only_for_a_clean_end_and_4_for_an_end_with_incidents() {
+        use crate::supervise::{Ending, Outcome};
+        let out = |ending, v: Option<serde_json::Value>| Outcome { ending, plant_summary: v }.exit_code();
+        assert_eq!(out(Ending::Completed, Some(serde_json::json!({"misses": 12, "safe_stops": 0}))), 0);
+        assert_eq!(out(Ending::Completed, Some(serde_json::json!({"safe_stops": 1}))), 4);
+        assert_eq!(out(Ending::Completed, Some(serde_json::json!({"recording_stopped_early": "No space left on device"}))), 4);
+        assert_eq!(out(Ending::Completed, None), 4);
+        assert_eq!(out(Ending::PlantFailed("x".into()), Some(serde_json::json!({"safe_stops": 1}))), 2);
+        assert_eq!(out(Ending::ControllerFailed("x".into()), None), 3);
+        assert_eq!(out(Ending::Interrupted, None), 130);
+        assert_eq!(out(Ending::Terminated, None), 143);
     }
 
     #[test]

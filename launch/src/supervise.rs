@@ -32,22 +32,27 @@ pub struct RigLaunch {
 pub enum Ending {
     /// The plant reached its duration and both exited 0.
     Completed,
-    /// The user pressed Ctrl-C (or rig got SIGTERM); both were stopped cleanly.
+    /// The user pressed Ctrl-C (rig got SIGINT); both were stopped cleanly.
     Interrupted,
+    /// rig got SIGTERM; both were stopped cleanly.
+    Terminated,
     /// The plant failed (non-zero exit or killed); the controller was stopped.
     PlantFailed(String),
-    /// The controller exited while the plant still ran; the plant was stopped cleanly.
+    /// The controller exited while the plant still ran; the plant was told (safe stop), then
+    /// stopped cleanly.
     ControllerFailed(String),
 }
 
 impl Ending {
-    /// Process exit code of `rig run` for this ending.
+    /// Process exit code of `rig run` for this ending, before the plant's summary is read
+    /// (a completed run is 0 or 4: [`Outcome::exit_code`]).
     pub fn exit_code(&self) -> i32 {
         match self {
             Ending::Completed => 0,
             Ending::PlantFailed(_) => 2,
             Ending::ControllerFailed(_) => 3,
             Ending::Interrupted => 130,
+            Ending::Terminated => 143,
         }
     }
 }
@@ -57,6 +62,59 @@ impl Ending {
 pub struct Outcome {
     pub ending: Ending,
     pub plant_summary: Option<serde_json::Value>,
+}
+
+impl Outcome {
+    /// `rig run`'s exit status: a run that reached its end is 0 only without safe stop, reflex,
+    /// refused torque or an incomplete recording (and with the plant's summary to say so), else 4;
+    /// 2, 3, 130, 143 by the ending.
+    pub fn exit_code(&self) -> i32 {
+        match (&self.ending, &self.plant_summary) {
+            (Ending::Completed, Some(v)) if crate::summary::incidents(v).is_empty() => 0,
+            (Ending::Completed, _) => 4,
+            (e, _) => e.exit_code(),
+        }
+    }
+}
+
+/// How long the plant gets between rig's report that the controller ended (SIGUSR1) and its
+/// SIGTERM: it enters the safe stop and records the event within a tick or two.
+const CONTROLLER_END_GRACE: Duration = Duration::from_millis(100);
+
+/// True when process `pid` catches `sig` (`SigCgt` in /proc/PID/status).
+fn catches_signal(pid: u32, sig: i32) -> bool {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("SigCgt:"))
+        .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
+        .is_some_and(|mask| mask & (1u64 << (sig - 1)) != 0)
+}
+
+/// Tell the plant that the controller process ended (`sigqueue(SIGUSR1)` with
+/// `plant_sim::rt::encode_controller_end` as the value, which `plant_sim::rt` reads from
+/// `si_value.sival_ptr`): it enters the safe stop and records "controller process ended (...)".
+/// Not before the plant has installed its handler (a SIGUSR1 would kill it): a plant still starting
+/// up has no loop to safe-stop. Returns whether the plant was told.
+fn report_controller_end(plant: &Child, status: ExitStatus) -> bool {
+    use plant_sim::rt::{encode_controller_end, ControllerEnd};
+    use std::os::unix::process::ExitStatusExt;
+    let end = match (status.code(), status.signal()) {
+        (Some(c), _) => ControllerEnd::Exit(c),
+        (None, Some(s)) => ControllerEnd::Signal(s),
+        _ => ControllerEnd::Unknown,
+    };
+    let Some(pid) = plant.id() else { return false };
+    if !catches_signal(pid, libc::SIGUSR1) {
+        return false;
+    }
+    let value = libc::sigval { sival_ptr: encode_controller_end(end) as isize as usize as *mut libc::c_void };
+    // SAFETY: queueing a signal to our own child, which is not reaped yet (its pid is ours).
+    if unsafe { libc::sigqueue(pid as i32, libc::SIGUSR1, value) } != 0 {
+        tracing::warn!("could not tell plant-sim that the controller ended: {}", std::io::Error::last_os_error());
+        return false;
+    }
+    true
 }
 
 /// Unique rig name for this process: `r<pid>-<nanoseconds>`.
@@ -221,6 +279,8 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
 
     let mut sigint = signal(SignalKind::interrupt())?;
     let mut sigterm = signal(SignalKind::terminate())?;
+    let mut controller_exited_first = false;
+    let mut plant_told = false;
     let ending = tokio::select! {
         biased;
         s = plant.wait() => {
@@ -244,21 +304,32 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             // starts first and owns the rig.
             if let Ok(Some(p)) = plant.try_wait() {
                 if !p.success() && !c.success() {
-                    return finish(Ending::PlantFailed(format!("plant-sim {}; controller {}", ended(p), ended(c))), reader).await;
+                    return finish(Ending::PlantFailed(format!("plant-sim {}; controller {}", ended(p), ended(c))), reader, false, false).await;
                 }
             }
-            // A controller exits 0 only after the plant's goodbye: then the plant is finishing too.
-            let p = if c.success() {
-                await_or_stop(&mut plant, Duration::from_secs(5)).await
-            } else {
-                stop(&mut plant, Duration::from_secs(10)).await
+            // A controller exits 0 only after the plant's goodbye, when the plant is finishing
+            // too; any other exit leaves a running plant without a controller. Either way: tell
+            // the plant (safe stop, an /events entry; harmless once its loop is over), give it
+            // 100 ms, stop it (it finalises its recording). Whether the plant had reached its end
+            // is read from its summary below.
+            let told = report_controller_end(&plant, c);
+            plant_told = told;
+            let p = match tokio::time::timeout(CONTROLLER_END_GRACE, plant.wait()).await {
+                Ok(Ok(s)) => Some(s),
+                _ => stop(&mut plant, Duration::from_secs(10)).await,
             };
             if c.success() && p.is_some_and(|p| p.success()) {
+                controller_exited_first = true;
                 Ending::Completed
             } else if c.success() {
                 Ending::PlantFailed(format!("plant-sim {} after the controller finished", describe_stopped(p)))
             } else {
-                Ending::ControllerFailed(format!("controller quit early: it {}; plant-sim {}", ended(c), describe_stopped(p)))
+                Ending::ControllerFailed(format!(
+                    "controller quit early: it {}; plant-sim {}{}",
+                    ended(c),
+                    if told { "told (SIGUSR1), then " } else { "" },
+                    describe_stopped(p)
+                ))
             }
         }
         _ = sigint.recv() => {
@@ -269,16 +340,29 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
         _ = sigterm.recv() => {
             stop(&mut plant, Duration::from_secs(10)).await;
             await_or_stop(&mut controller, Duration::from_secs(2)).await;
-            Ending::Interrupted
+            Ending::Terminated
         }
     };
-    finish(ending, reader).await
+    finish(ending, reader, controller_exited_first, plant_told).await
 }
 
 /// The outcome with the plant's summary line, once its stdout is read to the end.
-async fn finish(ending: Ending, reader: tokio::task::JoinHandle<String>) -> anyhow::Result<Outcome> {
+async fn finish(ending: Ending, reader: tokio::task::JoinHandle<String>, controller_exited_first: bool, plant_told: bool) -> anyhow::Result<Outcome> {
     let out = tokio::time::timeout(Duration::from_secs(5), reader).await.ok().and_then(|r| r.ok()).unwrap_or_default();
     let plant_summary = out.lines().rev().find_map(|line| serde_json::from_str::<serde_json::Value>(line).ok());
+    // A plant that exits 0 after a stop signal did not reach its end: rig stopped it because the
+    // controller exited first, or somebody else stopped it.
+    let stopped_by_signal = plant_summary.as_ref().and_then(|v| v.get("stopped_by_signal")).and_then(serde_json::Value::as_bool);
+    let ending = match ending {
+        Ending::Completed if stopped_by_signal != Some(false) && controller_exited_first => Ending::ControllerFailed(format!(
+            "controller exited 0 before the plant reached its end; plant {}stopped",
+            if plant_told { "told (SIGUSR1), then " } else { "" }
+        )),
+        Ending::Completed if stopped_by_signal == Some(true) => {
+            Ending::PlantFailed("plant-sim was stopped by a signal (not from rig) before the end of the run".into())
+        }
+        e => e,
+    };
     Ok(Outcome { ending, plant_summary })
 }
 

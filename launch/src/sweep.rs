@@ -109,7 +109,11 @@ pub struct CaseResult {
     pub label: String,
     pub scenario: PathBuf,
     pub recording: PathBuf,
+    /// `rig run`'s exit status for this case (0 clean, 4 reached the end with a safe stop,
+    /// reflex, refused torque or an incomplete recording, 2/3 a daemon failed).
     pub exit_code: i32,
+    /// Why, when not 0: the summary's last line without its `rig: exit N: ` prefix.
+    pub status: String,
     pub misses: Option<u64>,
     pub safe_stops: Option<u64>,
     pub force_error_max_n: Option<f64>,
@@ -124,6 +128,28 @@ pub fn label(axes: &[Axis], case: &[(usize, usize)]) -> String {
     case.iter().map(|&(a, v)| format!("{}.{}={}", axes[a].section, axes[a].field, axes[a].values[v])).collect::<Vec<_>>().join(" ")
 }
 
+/// The exit column: the status, and for a case that is not clean (4: a safe stop, reflex, refused
+/// torque or incomplete recording; 2/3: a daemon failed) what happened.
+fn exit_cell(r: &CaseResult) -> String {
+    if r.exit_code == 0 || r.status.is_empty() {
+        r.exit_code.to_string()
+    } else {
+        format!("{}: {}", r.exit_code, r.status.replace('|', "/"))
+    }
+}
+
+/// `rig sweep`'s own exit status: 0 when every case is clean, 4 when every case reached its end
+/// but some are not clean (exit 4), 1 when a case failed.
+pub fn sweep_exit_code(results: &[CaseResult]) -> i32 {
+    if results.iter().all(|r| r.exit_code == 0) {
+        0
+    } else if results.iter().all(|r| r.exit_code == 0 || r.exit_code == 4) {
+        4
+    } else {
+        1
+    }
+}
+
 /// The table `rig sweep` prints (markdown).
 pub fn table(results: &[CaseResult]) -> String {
     let f = |v: Option<f64>, scale: f64, digits: usize| v.map_or("—".to_string(), |x| format!("{:.*}", digits, x * scale));
@@ -136,7 +162,7 @@ pub fn table(results: &[CaseResult]) -> String {
         s += &format!(
             "| {} | {} | {} | {} | {} | {} % | {} |\n",
             r.label,
-            r.exit_code,
+            exit_cell(r),
             r.misses.map_or("—".into(), |m| m.to_string()),
             f(r.force_error_max_n, 1.0, 3),
             f(r.force_error_rms_n, 1.0, 3),
@@ -224,6 +250,35 @@ mod tests {
         assert_eq!(doc["trajectory"]["roll_s"].as_integer(), Some(1));
         assert_eq!(doc["loop"]["mode"].as_str(), Some("realtime"));
         assert_eq!(label(&axes, &[(0, 0), (1, 0)]), "bulge.height_mm=0.4 trajectory.roll_s=1");
+    }
+
+    fn result(label: &str, exit_code: i32, status: &str) -> CaseResult {
+        CaseResult {
+            label: label.into(),
+            scenario: PathBuf::new(),
+            recording: PathBuf::new(),
+            exit_code,
+            status: status.into(),
+            misses: Some(0),
+            safe_stops: Some(0),
+            force_error_max_n: None,
+            force_error_rms_n: None,
+            bond_share: None,
+            bond_weakest_pa: None,
+            bond_weakest_z_m: None,
+        }
+    }
+
+    #[test]
+    fn a_case_with_exit_4_says_so_in_the_table_and_in_the_sweep_status() {
+        let clean = result("a.x=1", 0, "reached the end; no safe stop, reflex or refused torque; recording complete");
+        let stopped = result("a.x=2", 4, "1 reflex (first at tick 512), 1 safe stop (first at tick 512)");
+        let t = table(&[clean.clone(), stopped.clone()]);
+        assert!(t.contains("| a.x=1 | 0 | 0 |"), "{t}");
+        assert!(t.contains("| a.x=2 | 4: 1 reflex (first at tick 512), 1 safe stop (first at tick 512) | 0 |"), "{t}");
+        assert_eq!(sweep_exit_code(std::slice::from_ref(&clean)), 0);
+        assert_eq!(sweep_exit_code(&[clean.clone(), stopped.clone()]), 4);
+        assert_eq!(sweep_exit_code(&[stopped, result("a.x=3", 3, "controller failed: x")]), 1);
     }
 
     #[test]

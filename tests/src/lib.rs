@@ -252,3 +252,40 @@ pub fn python_rig(
     let py = Daemon::start("python-controller", script, &args, &t.dir);
     Some((g, t, plant, py))
 }
+
+/// "No torque jump": around a takeover the applied torque changes per tick by at most 2 % of each
+/// joint's torque limit, i.e. crossing the whole torque range would take at least 50 ticks. (The
+/// restarted controller's first command differs from the safe-stop torque by up to ~1000 N m on
+/// joint 2 here, as it pulls the sagged arm back to its start pose; applied at once, that is the
+/// jump this rules out.)
+pub fn assert_no_jump(rec: &recordings::read::Recording, takeover: u64) {
+    let rows: Vec<_> = rec.joint_torque.iter().filter(|t| t.tick + 5 >= takeover && t.tick <= takeover + 100).collect();
+    assert!(rows.len() > 50, "takeover at tick {takeover} too close to the end");
+    for w in rows.windows(2) {
+        for j in 0..6 {
+            let d = (w[1].torque.tau[j] - w[0].torque.tau[j]).abs();
+            assert!(d < 0.02 * robot::Robot::TORQUE_LIMIT_NM[j], "joint {} jumps {d} N m at tick {}", j + 1, w[1].tick);
+        }
+    }
+}
+
+/// The pid of the child of `parent` whose command name (`/proc/PID/comm`) is `comm`, e.g. the
+/// `controller` that `rig run` started.
+pub fn child_pid(parent: i32, comm: &str) -> Option<i32> {
+    let tasks = std::fs::read_dir(format!("/proc/{parent}/task")).ok()?;
+    tasks
+        .flatten()
+        .filter_map(|t| std::fs::read_to_string(t.path().join("children")).ok())
+        .flat_map(|c| c.split_whitespace().filter_map(|p| p.parse::<i32>().ok()).collect::<Vec<_>>())
+        .find(|pid| std::fs::read_to_string(format!("/proc/{pid}/comm")).is_ok_and(|c| c.trim() == comm))
+}
+
+/// Wall-clock time now, ns since the Unix epoch (the recordings' `publish_wall_ns` clock).
+pub fn wall_ns() -> u64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
+}
+
+/// The first tick the plant published at or after the wall-clock time `ns` (from `/timing`).
+pub fn tick_at_wall_ns(rec: &recordings::read::Recording, ns: u64) -> Option<u64> {
+    rec.timing.iter().find(|t| t.timing.publish_wall_ns >= ns).map(|t| t.tick)
+}

@@ -93,7 +93,13 @@ fn killed_controller_puts_the_plant_into_safe_stop_and_a_restarted_one_resumes_w
     std::thread::sleep(Duration::from_millis(400));
     first.signal(libc::SIGKILL);
     first.expect_exit(Duration::from_secs(5));
-    wait_for_log(&plant, "safe stop after", Duration::from_secs(5));
+    // The plant safe-stops when it sees the controller's node dead (logged as such), or after
+    // loop.max_consecutive_misses misses if it has not seen that yet.
+    let t0 = Instant::now();
+    while !(plant.stderr().contains("safe stop after") || plant.stderr().contains("controller's node is dead")) {
+        assert!(t0.elapsed() < Duration::from_secs(5), "no safe stop within 5 s:\n{}", plant.stderr());
+        std::thread::sleep(Duration::from_millis(10));
+    }
     std::thread::sleep(Duration::from_millis(200));
     let mut second = t.controller("controller-2", "controller", &[]);
     assert!(plant.expect_exit(LONG).success(), "plant: {}", plant.stderr());
@@ -113,22 +119,6 @@ fn killed_controller_puts_the_plant_into_safe_stop_and_a_restarted_one_resumes_w
     assert!(events(&rec, EventKind::ControllerChange).iter().any(|(k, _)| *k == resume));
     assert_eq!(rec.joint_state.last().unwrap().plant_status, PlantStatus::Running as u32);
     assert_no_jump(&rec, resume);
-}
-
-/// "No torque jump": around a takeover the applied torque changes per tick by at most 2 % of each
-/// joint's torque limit, i.e. crossing the whole torque range would take at least 50 ticks. (The
-/// restarted controller's first command differs from the safe-stop torque by up to ~1000 N m on
-/// joint 2 here, as it pulls the sagged arm back to its start pose; applied at once, that is the
-/// jump this rules out.)
-fn assert_no_jump(rec: &Recording, takeover: u64) {
-    let rows: Vec<_> = rec.joint_torque.iter().filter(|t| t.tick + 5 >= takeover && t.tick <= takeover + 100).collect();
-    assert!(rows.len() > 50, "takeover at tick {takeover} too close to the end");
-    for w in rows.windows(2) {
-        for j in 0..6 {
-            let d = (w[1].torque.tau[j] - w[0].torque.tau[j]).abs();
-            assert!(d < 0.02 * robot::Robot::TORQUE_LIMIT_NM[j], "joint {} jumps {d} N m at tick {}", j + 1, w[1].tick);
-        }
-    }
 }
 
 #[test]
