@@ -20,7 +20,7 @@
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
-use messages::ports::{PlantPorts, Wake};
+use messages::ports::PlantPorts;
 use messages::{state_flags, ControllerDiagnostics, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
 use scenario::Mode;
 
@@ -122,6 +122,9 @@ pub struct PlantLoop<'a> {
     pub watch: Option<&'a PeerWatch>,
     pub reflex_limits: ReflexLimits,
 }
+
+/// Longest single sleep while waiting for a torque (see `wait_for_answers`).
+const WAIT_SLICE: Duration = Duration::from_millis(1);
 
 /// How long a lockstep plant republishes the waiting state while no controller has answered yet.
 const LOCKSTEP_REPUBLISH: Duration = Duration::from_millis(5);
@@ -259,15 +262,24 @@ impl PlantLoop<'_> {
                 std::hint::spin_loop();
             }
         }
+        // Then sleep on the notification, in slices of at most WAIT_SLICE: a stop signal, the
+        // launcher's report that the controller ended, or the watcher finding the active
+        // controller gone end the wait early (a lockstep wait may last the 2 s watchdog), and an
+        // answer whose notification was lost is still found within a slice.
         loop {
             self.ports.receive_answers(tick, answers);
             if settled(answers) {
                 return;
             }
-            if self.ports.wait_torque(deadline) == Wake::Timeout {
-                self.ports.receive_answers(tick, answers);
+            let gone = self.arbiter.active().is_some_and(|a| self.watch.is_some_and(|w| w.is_gone(a)));
+            if rt::stop_requested() || rt::controller_end_pending() || gone {
                 return;
             }
+            let now = Instant::now();
+            if now >= deadline {
+                return;
+            }
+            let _ = self.ports.wait_torque(deadline.min(now + WAIT_SLICE));
         }
     }
 
@@ -424,10 +436,6 @@ impl PlantLoop<'_> {
                 w.follow(self.arbiter.active().unwrap_or(0));
             }
             self.report_arbiter(tick, sim_t, &arb_events);
-            if rt::stop_requested() && torque.is_none() {
-                stats.stopped_by_signal = true;
-                break;
-            }
             let recv_ns = rt::now_mono_ns();
             if torque.is_some() && first_answer.is_none() {
                 first_answer = Some((publish_ns, tick));
@@ -460,6 +468,11 @@ impl PlantLoop<'_> {
             if arb_events.takeover.is_some() {
                 gone_reported = false;
             }
+            // Stopping (after the controller-end report above is recorded).
+            if rt::stop_requested() && torque.is_none() {
+                stats.stopped_by_signal = true;
+                break;
+            }
             let decision = self.gate.decide(torque.as_ref(), &self.physics.gravity_torque(), &self.physics.qd());
             if decision.events.safe_stop_entered {
                 stats.first_safe_stop_tick.get_or_insert(tick);
@@ -472,7 +485,11 @@ impl PlantLoop<'_> {
                 if !paced && decision.missed && torque.is_none() {
                     paced = true;
                     next_deadline_ns = rt::now_mono_ns() + p.period_ns;
-                    let text = "lockstep watchdog expired: pacing in real time until a controller answers";
+                    let text = if gone_reported {
+                        "the controller is gone: pacing in real time until a controller answers"
+                    } else {
+                        "lockstep watchdog expired: pacing in real time until a controller answers"
+                    };
                     tracing::warn!("tick {tick}: {text}");
                     self.event(tick, sim_t, EventKind::ModeChange, text);
                 } else if paced && !decision.held {

@@ -192,6 +192,7 @@ impl Physics {
                 Integrator::Midpoint => self.midpoint(&q, &qd, tau, h),
                 Integrator::Rk4 => self.rk4(&q, &qd, tau, h),
             };
+            self.limits.limit_driven_speed(tau_cmd, &mut self.qd);
         }
         self.time_s += h * self.substeps as f64;
     }

@@ -196,6 +196,12 @@ pub fn encode_controller_end(end: ControllerEnd) -> i32 {
     }
 }
 
+/// True while a controller-end report waits to be taken (a wait should end early for it).
+#[inline]
+pub fn controller_end_pending() -> bool {
+    CONTROLLER_ENDED.load(Ordering::Relaxed) != 0
+}
+
 /// Taken once: the controller-end report `rig` sent, if any.
 pub fn take_controller_end() -> Option<ControllerEnd> {
     let v = CONTROLLER_ENDED.swap(0, Ordering::Relaxed);

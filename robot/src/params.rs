@@ -106,11 +106,14 @@ pub const END_STOP_PENETRATION_AT_TORQUE_LIMIT_RAD: f64 = 0.25 * DEG;
 
 /// Drive torque–speed limit: a drive delivers its full torque up to the knee
 /// `DRIVE_KNEE_SPEED_RATIO × VELOCITY_LIMIT_RADPS` and, while it drives the joint faster still
-/// (motoring), linearly less, down to zero at `DRIVE_ZERO_TORQUE_SPEED_RATIO ×` the axis speed. Braking
-/// torque is never limited. ABB publishes no drive curves; the knee at the axis speed and the
-/// zero 10 % above it make the axis speed the practical maximum, as on the real arm.
+/// (motoring), linearly less, down to zero at `DRIVE_ZERO_TORQUE_SPEED_RATIO ×` the axis speed;
+/// beyond that it brakes (the drive's speed limiter), with its full torque from
+/// `DRIVE_FULL_BRAKE_SPEED_RATIO ×` the axis speed on, so coupling or gravity cannot carry a joint
+/// much past it either. Braking torque is never limited. ABB publishes no drive curves; the knee
+/// at the axis speed and the zero 5 % above it make the axis speed the practical maximum.
 pub const DRIVE_KNEE_SPEED_RATIO: f64 = 1.0;
-pub const DRIVE_ZERO_TORQUE_SPEED_RATIO: f64 = 1.1;
+pub const DRIVE_ZERO_TORQUE_SPEED_RATIO: f64 = 1.05;
+pub const DRIVE_FULL_BRAKE_SPEED_RATIO: f64 = 1.1;
 
 /// Joint torque limits (N m). ABB does not publish them and the thesis gives none; these are
 /// assumed values, a few times the static gravity load of each axis at full reach (axes 1-3)
