@@ -15,7 +15,7 @@ use std::time::Duration;
 use iceoryx2::prelude::*;
 
 use crate::ports::PortError;
-use crate::{qos, services};
+use crate::services;
 
 /// How often the node list is read: a dead peer is seen within this plus the scan, well inside
 /// the 100 ms the contract promises.
@@ -124,23 +124,7 @@ impl Drop for PeerWatch {
     }
 }
 
-type Factory<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
-
-fn open<T: core::fmt::Debug + ZeroCopySend + Copy>(node: &Node<ipc::Service>, rig: &str, svc: &str) -> Result<Factory<T>, PortError> {
-    let name = services::service_name(rig, svc);
-    let name: ServiceName = name.as_str().try_into().map_err(|e| PortError(format!("rig {rig:?}: {svc}: {e:?}")))?;
-    node.service_builder(&name)
-        .publish_subscribe::<T>()
-        .max_publishers(qos::MAX_PUBLISHERS)
-        .max_subscribers(qos::MAX_SUBSCRIBERS)
-        .max_nodes(qos::MAX_NODES)
-        .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
-        .subscriber_max_borrowed_samples(qos::MAX_BORROWED_SAMPLES)
-        .history_size(qos::HISTORY)
-        .enable_safe_overflow(qos::SAFE_OVERFLOW)
-        .open_or_create()
-        .map_err(|e| PortError(format!("rig {rig:?}: peer watcher: open service {svc}: {e:?}")))
-}
+use crate::ports::{pubsub as open, PsFactory as Factory};
 
 /// The node of publisher `id` on a service, if it is registered there.
 fn node_of<T: core::fmt::Debug + ZeroCopySend + Copy>(f: &Factory<T>, id: u128) -> Option<u128> {

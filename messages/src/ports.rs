@@ -80,21 +80,24 @@ fn service_name(rig: &str, svc: &str) -> Result<ServiceName, PortError> {
         .map_err(|e| err(rig, svc, e))
 }
 
-macro_rules! pubsub {
-    ($node:expr, $rig:expr, $svc:expr, $ty:ty) => {
-        $node
-            .service_builder(&service_name($rig, $svc)?)
-            .publish_subscribe::<$ty>()
-            .max_publishers(qos::MAX_PUBLISHERS)
-            .max_subscribers(qos::MAX_SUBSCRIBERS)
-            .max_nodes(qos::MAX_NODES)
-            .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
-            .subscriber_max_borrowed_samples(qos::MAX_BORROWED_SAMPLES)
-            .history_size(qos::HISTORY)
-            .enable_safe_overflow(qos::SAFE_OVERFLOW)
-            .open_or_create()
-            .map_err(|e| err($rig, concat!("open service ", stringify!($ty)), e))?
-    };
+/// Open (or create) publish-subscribe service `svc` of rig `rig` with the contract's QoS, one
+/// setting a line as iceoryx2's examples write it (every peer must ask for the same values).
+pub(crate) fn pubsub<T: core::fmt::Debug + ZeroCopySend + Copy>(
+    node: &Node<ipc::Service>,
+    rig: &str,
+    svc: &str,
+) -> Result<PsFactory<T>, PortError> {
+    node.service_builder(&service_name(rig, svc)?)
+        .publish_subscribe::<T>()
+        .max_publishers(qos::MAX_PUBLISHERS)
+        .max_subscribers(qos::MAX_SUBSCRIBERS)
+        .max_nodes(qos::MAX_NODES)
+        .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
+        .subscriber_max_borrowed_samples(qos::MAX_BORROWED_SAMPLES)
+        .history_size(qos::HISTORY)
+        .enable_safe_overflow(qos::SAFE_OVERFLOW)
+        .open_or_create()
+        .map_err(|e| err(rig, &format!("open service {svc}"), e))
 }
 
 fn event(
@@ -238,7 +241,7 @@ pub enum Wake {
     Timeout,
 }
 
-type PsFactory<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
+pub(crate) type PsFactory<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
 type EventFactory = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
 
 /// Every service of one rig, opened (or created) with the contract's QoS by one node. Both ends
@@ -258,10 +261,10 @@ impl RigServices {
     fn open(rig: &str, role: &str) -> Result<Self, PortError> {
         let node = node(rig, role)?;
         Ok(Self {
-            state: pubsub!(node, rig, services::JOINT_STATE, JointState),
-            wrench: pubsub!(node, rig, services::WRENCH, Wrench),
-            torque: pubsub!(node, rig, services::JOINT_TORQUE, JointTorque),
-            diag: pubsub!(node, rig, services::CONTROLLER_DIAGNOSTICS, ControllerDiagnostics),
+            state: pubsub(&node, rig, services::JOINT_STATE)?,
+            wrench: pubsub(&node, rig, services::WRENCH)?,
+            torque: pubsub(&node, rig, services::JOINT_TORQUE)?,
+            diag: pubsub(&node, rig, services::CONTROLLER_DIAGNOSTICS)?,
             state_ready: event(&node, rig, services::STATE_READY)?,
             torque_ready: event(&node, rig, services::TORQUE_READY)?,
             _node: node,
