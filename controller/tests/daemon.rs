@@ -47,8 +47,13 @@ fn spawn_with(rig: &str, version: u32, dead: Duration, scenario: Scenario) -> th
 
 /// Publish until the controller's ports exist and it answers tick 0.
 fn lockstep_ticks(plant: &PlantPorts, n: u64, q: [f64; 6]) -> Vec<messages::JointTorque> {
+    lockstep_range(plant, 0..n, q)
+}
+
+/// Publish each tick of `ticks` until the controller answers it.
+fn lockstep_range(plant: &PlantPorts, ticks: std::ops::Range<u64>, q: [f64; 6]) -> Vec<messages::JointTorque> {
     let mut out = Vec::new();
-    for tick in 0..n {
+    for tick in ticks {
         let t_end = Instant::now() + Duration::from_secs(5);
         loop {
             plant.publish(&state(tick, PlantStatus::Running, q), &wrench(tick)).unwrap();
@@ -130,4 +135,31 @@ fn gone_plant_is_detected_at_the_first_silence() {
     assert!(e.contains("after tick 2: the plant died"), "{e}");
     // Correctness, not timing: it did not wait for the default 5 s stall timeout.
     assert!(gone_at.elapsed() < Duration::from_secs(4), "{:?}", gone_at.elapsed());
+}
+
+/// A controller answers the plant it first connected to: another plant's states on the same rig
+/// (a second plant-sim, a replay tool), its goodbye included, are not its own and do not end it.
+#[test]
+fn another_plants_goodbye_does_not_end_the_controller() {
+    let rig = unique_rig("other");
+    let plant = PlantPorts::open(&rig, "fake-plant").unwrap();
+    let h = spawn(&rig, CONTRACT_VERSION, Duration::from_secs(5));
+    let q = start_q();
+    lockstep_ticks(&plant, 3, q);
+    let other = PlantPorts::open(&rig, "other-plant").unwrap();
+    for _ in 0..5 {
+        other.publish(&state(3, PlantStatus::ShuttingDown, q), &wrench(3)).unwrap();
+        thread::sleep(Duration::from_millis(20));
+    }
+    assert!(!h.is_finished(), "the other plant's goodbye ended the controller");
+    // Its own plant goes on, and its own goodbye ends it cleanly.
+    assert_eq!(lockstep_range(&plant, 3..6, q).len(), 3);
+    let t_end = Instant::now() + Duration::from_secs(5);
+    while !h.is_finished() && Instant::now() < t_end {
+        plant.publish(&state(6, PlantStatus::ShuttingDown, q), &wrench(6)).unwrap();
+        thread::sleep(Duration::from_millis(20));
+    }
+    let summary = h.join().unwrap().expect("exits Ok on its own plant's goodbye");
+    assert_eq!(summary.last_tick, 5);
+    drop(other);
 }

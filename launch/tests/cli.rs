@@ -230,3 +230,17 @@ fn the_harness_sees_a_start_when_the_values_are_good() {
     assert!(sb.marker.exists(), "the controller did not start:\n{}", r.stderr);
     let _ = std::fs::remove_dir_all(&sb.dir);
 }
+
+/// The recording tools say a missing file's OS error once too (`rig report`, `rig replay`,
+/// `rig compare`).
+#[test]
+fn a_missing_recording_prints_its_os_error_once() {
+    let sb = sandbox("missing-rec");
+    for args in [strings(&["report", "/nonexistent/run.mcap"]), strings(&["compare", "/nonexistent/a.mcap", "/nonexistent/b.mcap"])] {
+        let out = Command::new(RIG).args(&args).current_dir(&sb.dir).stdin(Stdio::null()).output().expect("start rig");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}: {err}");
+        assert_eq!(err.matches("os error 2").count(), 1, "{args:?}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&sb.dir);
+}

@@ -27,8 +27,9 @@ const FOOTER_TAIL: usize = RECORD_HEAD + 20 + MCAP_MAGIC.len();
 
 #[derive(Debug, Error)]
 pub enum ReadError {
-    #[error("cannot read recording {path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    /// The OS error is part of the message, not a `source` (printed once in an error chain).
+    #[error("cannot read recording {path}: {cause}")]
+    Io { path: PathBuf, cause: std::io::Error },
     #[error("{path} is not an MCAP recording (it starts with {start:02x?}, an MCAP file starts with {MCAP_MAGIC:02x?})")]
     NotMcap { path: PathBuf, start: Vec<u8> },
     #[error("{path} is truncated (cut short, no footer: the recording process was probably killed) after {ticks} intact ticks: {damage}")]
@@ -41,8 +42,8 @@ pub enum ReadError {
     SchemaMismatch { path: PathBuf, topic: String, found: String, expected: &'static str },
     #[error("{path}: in a chunk that passed its CRC, {what}; the file was written by another writer or version")]
     Format { path: PathBuf, what: String },
-    #[error("{path}: message {sequence} on {topic} does not decode: {source}")]
-    Decode { path: PathBuf, topic: String, sequence: u32, source: crate::cdr::CdrError },
+    #[error("{path}: message {sequence} on {topic} does not decode: {cause}")]
+    Decode { path: PathBuf, topic: String, sequence: u32, cause: crate::cdr::CdrError },
 }
 
 /// Where and why reading stopped early.
@@ -160,7 +161,7 @@ impl Recording {
     /// in `integrity`.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, ReadError> {
         let path = path.as_ref();
-        let io = |source| ReadError::Io { path: path.into(), source };
+        let io = |cause| ReadError::Io { path: path.into(), cause };
         let file = std::fs::File::open(path).map_err(io)?;
         if !file.metadata().map_err(io)?.is_file() {
             return Err(io(std::io::Error::other("not a regular file")));
@@ -307,7 +308,7 @@ impl Recording {
     }
 
     fn push_message(&mut self, path: &Path, ch: usize, m: &MessageHeader, data: &[u8]) -> Result<(), ReadError> {
-        let bad = |source| ReadError::Decode { path: path.into(), topic: CHANNELS[ch].topic.into(), sequence: m.sequence, source };
+        let bad = |source| ReadError::Decode { path: path.into(), topic: CHANNELS[ch].topic.into(), sequence: m.sequence, cause: source };
         match ch {
             0 => {
                 self.joint_state.push(schema::decode_joint_state(data).map_err(bad)?);

@@ -88,8 +88,9 @@ impl Default for RecorderTuning {
 
 #[derive(Debug, Error)]
 pub enum RecorderError {
-    #[error("recording {path}: cannot create the file: {source}")]
-    Create { path: PathBuf, source: std::io::Error },
+    /// The OS error is part of the message, not a `source` (printed once in an error chain).
+    #[error("recording {path}: cannot create the file: {cause}")]
+    Create { path: PathBuf, cause: std::io::Error },
     #[error("recording {path}: {what}")]
     Mcap { path: PathBuf, what: String },
     #[error("recording {path}: {what}")]
@@ -221,9 +222,9 @@ impl Recorder {
             None => Vec::new(),
         };
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|source| RecorderError::Create { path: path.clone(), source })?;
+            std::fs::create_dir_all(dir).map_err(|source| RecorderError::Create { path: path.clone(), cause: source })?;
         }
-        let file = File::create(&path).map_err(|source| RecorderError::Create { path: path.clone(), source })?;
+        let file = File::create(&path).map_err(|source| RecorderError::Create { path: path.clone(), cause: source })?;
         let fd = std::os::fd::AsRawFd::as_raw_fd(&file);
         let tally = Arc::new(Tally::default());
         let mcap_err = |e: mcap::McapError| RecorderError::Mcap { path: path.clone(), what: error_chain(&e) };
@@ -292,7 +293,7 @@ impl Recorder {
         let thread = std::thread::Builder::new()
             .name("recorder".into())
             .spawn(move || writer.run())
-            .map_err(|source| RecorderError::Create { path: path.clone(), source })?;
+            .map_err(|source| RecorderError::Create { path: path.clone(), cause: source })?;
         Ok(Self { producer: Some(producer), shared, thread: Some(thread), path })
     }
 

@@ -67,7 +67,7 @@ fn push_c(buf: &mut Vec<u8>, v: &[c64]) {
 
 /// Writes `model` to `path` atomically (temporary file + rename).
 pub fn save(model: &StripModel, path: &Path) -> Result<()> {
-    let io = |e| StripError::Io { path: path.display().to_string(), source: e };
+    let io = |e| StripError::Io { path: path.display().to_string(), cause: e };
     let h = Header {
         params_json: serde_json::to_string(&model.params).expect("params serialise"),
         info: model.info.clone(),
@@ -156,7 +156,7 @@ pub fn load(path: &Path, expect: &StripParams) -> Result<Option<StripModel>> {
     let bytes = match std::fs::read(path) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(StripError::Io { path: path.display().to_string(), source: e }),
+        Err(e) => return Err(StripError::Io { path: path.display().to_string(), cause: e }),
     };
     let bad = |d: &str| StripError::Cache { path: path.display().to_string(), detail: d.to_string() };
     if bytes.len() < 16 || &bytes[..8] != MAGIC {

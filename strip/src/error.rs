@@ -9,8 +9,9 @@ pub enum StripError {
     Numeric { stage: &'static str, detail: String },
     #[error("cache file {path}: {detail}")]
     Cache { path: String, detail: String },
-    #[error("i/o on {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    /// The OS error is part of the message, not a `source` (printed once in an error chain).
+    #[error("i/o on {path}: {cause}")]
+    Io { path: String, cause: std::io::Error },
 }
 
 pub type Result<T> = std::result::Result<T, StripError>;
