@@ -218,21 +218,40 @@ pub fn touchdown_profile(tau: f64, t: f64, v0: f64) -> (f64, f64, f64) {
     (v0 * (0.5 * tau + t / (2.0 * PI) * s), v0 * 0.5 * (1.0 + c), v0 * 0.5 * PI / t * s)
 }
 
-/// Re-approach after `tau` s from vertical velocity `v0` (signed, task y): the velocity blends
-/// (cosine, over `ramp`) to the approach speed downwards, then stays there. Returns the signed
-/// (displacement, velocity, acceleration) along task y.
+/// Re-approach after `tau` s from height `y0` and vertical velocity `v0` (signed, task y): the
+/// velocity blends (cosine, over `ramp`) to the approach speed downwards, then stays there, and
+/// the descent stops at `y_min` with the same cosine (the first approach's deepest point: without
+/// a strip the wheel does not go on into the table). Returns the signed (displacement from `y0`,
+/// velocity, acceleration) along task y.
 #[inline]
-pub fn reapproach_profile(tau: f64, ramp: f64, v0: f64, approach_speed: f64) -> (f64, f64, f64) {
+pub fn reapproach_profile(tau: f64, ramp: f64, y0: f64, v0: f64, approach_speed: f64, y_min: f64) -> (f64, f64, f64) {
     use std::f64::consts::PI;
-    let dv = -approach_speed - v0;
-    if tau <= 0.0 {
+    let v = approach_speed;
+    let dv = -v - v0;
+    // Cruise after the ramp: y = y0 - v tau - dv ramp / 2. The ramp-out (covering v ramp / 2)
+    // starts where that reaches y_min + v ramp / 2.
+    let tau_out = (y0 - dv * ramp / 2.0 - (y_min + v * ramp / 2.0)) / v;
+    if tau_out >= ramp && tau >= tau_out {
+        let x = (tau - tau_out).min(ramp);
+        let (s, c) = (PI * x / ramp).sin_cos();
+        let y_out = y_min + v * ramp / 2.0;
+        let d = y_out - v * (0.5 * x + ramp / (2.0 * PI) * s) - y0;
+        return if tau - tau_out >= ramp { (y_min - y0, 0.0, 0.0) } else { (d, -v * 0.5 * (1.0 + c), v * 0.5 * PI / ramp * s) };
+    }
+    let r = if tau <= 0.0 {
         (0.0, v0, 0.0)
     } else if tau < ramp {
         let (s, c) = (PI * tau / ramp).sin_cos();
         (v0 * tau + dv * (0.5 * tau - ramp / (2.0 * PI) * s), v0 + dv * 0.5 * (1.0 - c), dv * 0.5 * PI / ramp * s)
     } else {
-        (v0 * tau + dv * (tau - 0.5 * ramp), -approach_speed, 0.0)
+        (v0 * tau + dv * (tau - 0.5 * ramp), -v, 0.0)
+    };
+    // Started too close to the bottom for a smooth stop: hold at it (rare: the arm is already
+    // lower than the first approach ever went).
+    if y0 + r.0 < y_min && r.1 < 0.0 {
+        return (y_min - y0, 0.0, 0.0);
     }
+    r
 }
 
 /// Inside a force-controlled phase: is the wheel pressing, or finding the strip again after it
@@ -448,7 +467,7 @@ impl ReferenceGenerator {
         self.contact = match self.contact {
             Contact::Pressing if force_y_n.abs() < 0.5 * p.contact_threshold_n => Contact::Reapproach { t0: t, y0: tcp_y_m, v0: 0.0 },
             Contact::Reapproach { t0, y0, v0 } if force_y_n.abs() > p.contact_threshold_n => {
-                let (d, v, _) = reapproach_profile(t - t0, p.approach_ramp_s, v0, p.approach_speed_mps);
+                let (d, v, _) = reapproach_profile(t - t0, p.approach_ramp_s, y0, v0, p.approach_speed_mps, p.start_task_m.y - p.approach_max_descent_m);
                 Contact::Touchdown { t0: t, y0: y0 + d, v0: -v }
             }
             // The hand-over also waits for the re-engagement's fade to end: the arm must not
@@ -594,7 +613,7 @@ impl ReferenceGenerator {
                     }
                 }
                 Contact::Reapproach { t0, y0, v0 } => {
-                    let (d, v, a) = reapproach_profile(t - t0, p.approach_ramp_s, v0, p.approach_speed_mps);
+                    let (d, v, a) = reapproach_profile(t - t0, p.approach_ramp_s, y0, v0, p.approach_speed_mps, p.start_task_m.y - p.approach_max_descent_m);
                     r.force_mode = false;
                     r.pos_m.y = y0 + d;
                     r.vel_mps.y = v;
@@ -842,6 +861,31 @@ mod tests {
         assert!(!g.holds_clock());
         let r = g.update(tk + REENGAGE_S + 1e-3, -10.0, r.pos_m.y);
         assert!((r.force_y_n + 10.0).abs() < 1e-9 && r.phase == Phase::Roll);
+    }
+
+    /// Without a strip to find, the re-approach stops where the first approach would (1 mm below
+    /// the nominal strip top), C¹: velocity continuous, acceleration its derivative.
+    #[test]
+    fn reapproach_without_contact_stops_at_the_first_approachs_deepest_point() {
+        let p = ReferenceParams::from_scenario(&Scenario::default());
+        let y_min = p.start_task_m.y - p.approach_max_descent_m;
+        let (y0, v0) = (p.start_task_m.y + 1e-3, 0.02);
+        let dt = 1e-4;
+        let (mut prev, mut t) = (reapproach_profile(0.0, p.approach_ramp_s, y0, v0, p.approach_speed_mps, y_min), dt);
+        // The largest acceleration: the cosine blend from v0 to the approach speed, π Δv / (2 ramp).
+        let a_max = (v0 + p.approach_speed_mps) * std::f64::consts::PI / (2.0 * p.approach_ramp_s);
+        assert_eq!(prev, (0.0, v0, 0.0));
+        while t < 3.0 {
+            let r = reapproach_profile(t, p.approach_ramp_s, y0, v0, p.approach_speed_mps, y_min);
+            assert!((r.1 - prev.1).abs() <= a_max * dt * (1.0 + 1e-9), "velocity jump at {t}: {prev:?} -> {r:?}");
+            let a_fd = (r.1 - prev.1) / dt;
+            assert!((a_fd - 0.5 * (r.2 + prev.2)).abs() < 2e-3, "acceleration at {t}: {a_fd} vs {}", r.2);
+            assert!((r.0 - prev.0 - 0.5 * (r.1 + prev.1) * dt).abs() < 1e-8, "position is the integral of the velocity at {t}");
+            assert!(y0 + r.0 >= y_min - 1e-12, "below the deepest point at {t}");
+            prev = r;
+            t += dt;
+        }
+        assert!((y0 + prev.0 - y_min).abs() < 1e-12 && prev.1 == 0.0, "stopped at {} (deepest {y_min})", y0 + prev.0);
     }
 
     #[test]
