@@ -20,6 +20,7 @@ pub mod replay;
 pub mod report;
 pub mod schema;
 pub mod synthetic;
+pub mod tmpfs_test;
 mod writer;
 
 pub use writer::{Recorder, RecorderConfig, RecorderError, RecorderTuning, RecordingSummary};

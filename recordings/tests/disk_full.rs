@@ -6,10 +6,10 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use recordings::read::{Integrity, Recording};
 use recordings::synthetic::SyntheticRun;
+use recordings::tmpfs_test::run_inner_on_private_tmpfs;
 use recordings::{EventKind, Recorder, RecorderConfig, RecorderTuning, RecordingSummary};
 
 const DIR_ENV: &str = "RECORDINGS_FULL_DISK_DIR";
@@ -18,32 +18,9 @@ const TMPFS_BYTES: u64 = 384 << 10;
 #[test]
 fn a_full_disk_mid_run_stops_the_recording_and_keeps_the_complete_chunks() {
     let dir = std::env::temp_dir().join(format!("recordings-enospc-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let me = std::env::current_exe().unwrap();
-    // root may mount directly in a new mount namespace; others need a user namespace too
-    let user_ns = if unsafe { libc::geteuid() } == 0 { "" } else { "--user --map-root-user" };
-    let script = format!(
-        "mount -t tmpfs -o size={TMPFS_BYTES} tmpfs '{d}' || exit 77; exec '{me}' --exact inner_full_disk --ignored --nocapture",
-        d = dir.display(),
-        me = me.display()
-    );
-    let out = Command::new("sh")
-        .arg("-c")
-        .arg(format!("unshare --mount {user_ns} sh -c \"{script}\""))
-        .env(DIR_ENV, &dir)
-        .output()
-        .expect("sh");
-    let _ = std::fs::remove_dir_all(&dir);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    if out.status.code() == Some(77) || stderr.contains("unshare failed") || stderr.contains("Operation not permitted") {
-        // no mount namespace here (unprivileged CI without user namespaces): the EFBIG test in
-        // write_error.rs covers the same path with a file-size limit
-        eprintln!("SKIPPED: cannot mount a tmpfs in a private namespace on this machine: {stderr}");
-        return;
-    }
-    assert!(out.status.success(), "inner test failed:\n{stdout}\n{stderr}");
-    assert!(stdout.contains("test inner_full_disk ... ok"), "inner test did not run:\n{stdout}\n{stderr}");
+    // Where no mount namespace is allowed (unprivileged CI without user namespaces) it prints
+    // SKIPPED: the EFBIG test in write_error.rs covers the same path with a file-size limit.
+    let _ = run_inner_on_private_tmpfs(DIR_ENV, &dir, &format!("{}k", TMPFS_BYTES >> 10), "inner_full_disk");
 }
 
 /// Records 4000 synthetic ticks into `path` with `tuning`; returns the summary.

@@ -7,10 +7,10 @@
 //! every tick up to the stop. The inner test runs inside the namespace, started by the outer one.
 
 use recordings::read::{Integrity, Recording};
+use recordings::tmpfs_test::run_inner_on_private_tmpfs;
 use rig_tests::{bin, plant_summary, start_controller, temp_dir, unique_rig, write_scenario, Daemon};
 use std::os::fd::AsRawFd;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 const DIR_ENV: &str = "RIG_TESTS_FULL_DISK_DIR";
@@ -19,30 +19,7 @@ const TMPFS_MIB: u64 = 80;
 #[test]
 fn a_disk_filling_up_mid_run_ends_the_recording_cleanly_and_the_plant_says_why() {
     let dir = std::env::temp_dir().join(format!("rig-tests-enospc-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let me = std::env::current_exe().unwrap();
-    // root may mount directly in a new mount namespace; others need a user namespace too
-    let user_ns = if unsafe { libc::geteuid() } == 0 { "" } else { "--user --map-root-user" };
-    let script = format!(
-        "mount -t tmpfs -o size={TMPFS_MIB}m tmpfs '{d}' || exit 77; exec '{me}' --exact inner_plant_on_a_filling_disk --ignored --nocapture",
-        d = dir.display(),
-        me = me.display()
-    );
-    let out = Command::new("sh")
-        .arg("-c")
-        .arg(format!("unshare --mount {user_ns} sh -c \"{script}\""))
-        .env(DIR_ENV, &dir)
-        .output()
-        .expect("sh");
-    let _ = std::fs::remove_dir_all(&dir);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    if out.status.code() == Some(77) || stderr.contains("unshare failed") || stderr.contains("Operation not permitted") {
-        eprintln!("SKIPPED: cannot mount a tmpfs in a private namespace on this machine: {stderr}");
-        return;
-    }
-    assert!(out.status.success(), "inner test failed:\n{stdout}\n{stderr}");
-    assert!(stdout.contains("test inner_plant_on_a_filling_disk ... ok"), "inner test did not run:\n{stdout}\n{stderr}");
+    let Some(stdout) = run_inner_on_private_tmpfs(DIR_ENV, &dir, &format!("{TMPFS_MIB}m"), "inner_plant_on_a_filling_disk") else { return };
     print!("{}", stdout.lines().filter(|l| l.starts_with("recording_stopped_early")).map(|l| format!("{l}\n")).collect::<String>());
 }
 
