@@ -1,12 +1,13 @@
 //! The controller process loop (DESIGN section 6): wait on the plant's state event (ppoll on the
-//! listener's fd, no busy polling), read the newest state and wrench, compute the law, publish
+//! listener's fd; in real time a `loop.controller_spin_us` busy poll around the due time), read the newest state and wrench, compute the law, publish
 //! torque + diagnostics, notify. Per tick: no allocation, no logging, no locks.
 //!
 //! Exits: `Ok` when the plant says `ShuttingDown`; an error (non-zero exit) on a contract version
 //! mismatch (the message names both versions), when no state arrives within
-//! [`DaemonConfig::startup_timeout`] of starting, or when the plant falls silent for
-//! [`DaemonConfig::dead_plant_timeout`] (100 ms) after having been seen — in lockstep, for the
-//! scenario's `loop.lockstep_watchdog_s`, since a lockstep plant may be slow without being dead.
+//! [`DaemonConfig::startup_timeout`] of starting, when the plant's iceoryx2 node is dead (checked
+//! once it has been silent for [`DaemonConfig::dead_plant_timeout`], 100 ms, in lockstep for the
+//! scenario's `loop.lockstep_watchdog_s`), or when a live plant stays silent for
+//! `loop.peer_stall_timeout_s`: silence alone is not death (a host stall).
 
 use std::time::{Duration, Instant};
 
