@@ -1,6 +1,6 @@
 //! The controller process loop (DESIGN section 6): wait on the plant's state event (ppoll on the
-//! listener's fd; in real time a `loop.controller_spin_us` busy poll around the due time), read the newest state and wrench, compute the law, publish
-//! torque + diagnostics, notify. Per tick: no allocation, no logging, no locks.
+//! listener's fd; in real time a `loop.controller_spin_us` busy poll around the due time), read
+//! the newest state and wrench, compute the law, publish torque + diagnostics, notify. Per tick: no allocation, no logging, no locks.
 //!
 //! Exits: `Ok` when the plant says `ShuttingDown`; an error (non-zero exit) on a contract version
 //! mismatch (the message names both versions), when no state arrives within
