@@ -112,8 +112,8 @@ impl ReferenceParams {
 }
 
 impl ReferenceParams {
-    /// Force set-point (N) with the wheel at strip position `z_m`: linear between the table's
-    /// knots, held beyond its ends; `force_ref_n` without a table.
+    /// Force set-point (N) with the wheel at strip position `z_m`: cosine-blended between the
+    /// table's knots ([`cosine_blend`]), held beyond its ends; `force_ref_n` without a table.
     pub fn force_at(&self, z_m: f64) -> f64 {
         self.force_and_slope_at(z_m).0
     }
@@ -899,6 +899,25 @@ mod tests {
         assert!((p.force_at(0.010) + 12.0).abs() < 1e-12);
         assert!((p.force_at(0.021) + 13.0).abs() < 1e-12);
         assert_eq!(p.force_at(0.038), -12.0);
+        // Off the midpoints the blend is (1 - cos pi x)/2, not linear: a quarter of the way from
+        // 8 mm (-10 N) to 12 mm (-14 N), -10 - 4 (1 - cos pi/4)/2 = -10.586 N (linear: -11 N).
+        let quarter = -10.0 - 4.0 * (1.0 - (std::f64::consts::PI / 4.0).cos()) / 2.0;
+        assert!((p.force_at(0.009) - quarter).abs() < 1e-12, "{} vs {quarter}", p.force_at(0.009));
+        // The slope is the derivative of the set-point (central differences) and zero at a knot
+        // from both sides (a linear table: 1,000 N/m and 111 N/m each side of 12 mm), so the
+        // fed-forward rate has no step there.
+        for z in [0.0085, 0.009, 0.0115, 0.02, 0.029] {
+            let h = 1e-7;
+            let fd = (p.force_at(z + h) - p.force_at(z - h)) / (2.0 * h);
+            let slope = p.force_and_slope_at(z).1;
+            assert!((slope - fd).abs() < 1e-6 * (1.0 + fd.abs()), "z {z}: slope {slope} vs {fd}");
+        }
+        for knot in [0.008, 0.012, 0.030] {
+            for side in [-1e-9, 1e-9] {
+                let slope = p.force_and_slope_at(knot + side).1;
+                assert!(slope.abs() < 1e-2, "slope at {knot} {side:+}: {slope} N/m");
+            }
+        }
         // Through the phases: the dwell presses with the table's force at z_start, the roll with
         // the force at the reference's own z, and the ramp-down starts from the force at z_end.
         let mut g = ReferenceGenerator::new(p);

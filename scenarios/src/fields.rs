@@ -237,7 +237,7 @@ pub static FIELDS: &[Field] = &[
         unit: "mm, N",
         range: ANY,
         rule: None,
-        meaning: "Optional force set-point along the strip, linear in between and held beyond the ends; replaces force_ref_n from the force ramp to the ramp-down.",
+        meaning: "Optional force set-point along the strip, cosine-blended between knots ((1 - cos pi x)/2: slope continuous, zero at each knot) and held beyond the ends; replaces force_ref_n from the force ramp to the ramp-down.",
     },
     num("trajectory.force_ramp_s", "s", POSITIVE, "Force ramp time (cosine blend from the contact force to the set-point)."),
     num("trajectory.dwell_s", "s", NON_NEGATIVE, "Dwell at full force before rolling."),
