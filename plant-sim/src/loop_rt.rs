@@ -357,6 +357,9 @@ impl PlantLoop<'_> {
         let mut answers = Answers::default();
         let mut in_end_stop: Option<usize> = None;
         let mut gone_reported = false;
+        // Tick of the state whose answer was last applied: what `/joint_torque.answered_tick`
+        // records (the current tick when fresh, older when held).
+        let mut applied_answer_tick = recordings::NEVER_ANSWERED;
         // One reference instant for both clocks: Instant is CLOCK_MONOTONIC on Linux.
         let (origin, origin_ns) = (Instant::now(), rt::now_mono_ns());
         let at = |ns: u64| origin + Duration::from_nanos(ns.saturating_sub(origin_ns));
@@ -510,10 +513,13 @@ impl PlantLoop<'_> {
                 stats.controller_compute.record(d.compute_time_ns);
             }
             self.physics.fill_strip_record(&mut strip);
+            if let Some(t) = torque.as_ref().filter(|_| !decision.held) {
+                applied_answer_tick = t.tick;
+            }
             let applied = JointTorque {
                 contract_version: CONTRACT_VERSION,
-                controller_status: torque.map_or(0, |t| t.controller_status),
-                tick,
+                controller_status: torque.map_or(recordings::STATUS_NO_ANSWER, |t| t.controller_status),
+                tick: applied_answer_tick,
                 controller_id: self.gate.controller_id().unwrap_or(0),
                 tau: decision.tau.into(),
             };

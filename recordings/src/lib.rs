@@ -30,6 +30,13 @@ use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, DOF};
 /// Most centre-line nodes a [`StripRecord`] carries (the 0.5 mm mesh of a 40 mm strip has 81).
 pub const MAX_CENTRELINE: usize = 256;
 
+/// `/joint_torque.controller_status` of a tick for which no answer arrived (the wire's statuses
+/// are 0 to 2, `messages::ControllerStatus`): the torque was held or the safe stop's.
+pub const STATUS_NO_ANSWER: u32 = 3;
+
+/// `/joint_torque.answered_tick` before any answer was applied.
+pub const NEVER_ANSWERED: u64 = u64::MAX;
+
 /// Format version of the files this crate writes (metadata `rig/recording_format`).
 pub const RECORDING_FORMAT_VERSION: u32 = 1;
 

@@ -57,8 +57,9 @@ pub const JOINT_TORQUE: ChannelDef = ChannelDef {
 uint32 CONTROLLER_ACTIVE=0
 uint32 CONTROLLER_STARTING=1
 uint32 CONTROLLER_FAULT=2
+uint32 CONTROLLER_NO_ANSWER=3  # recording only: no answer arrived for this tick
 uint64 tick                 # tick whose interval this torque was applied over
-uint64 answered_tick        # tick of the joint state the controller answered (< tick if held)
+uint64 answered_tick        # tick of the state whose answer was last applied (< tick if held; 2^64-1: none yet)
 float64[6] tau              # N m, as applied
 bool held                   # true if held from an earlier tick (late, missing or refused answer)
 uint32 controller_status    # CONTROLLER_*

@@ -423,6 +423,19 @@ fn refused_torques_and_a_safe_stop_give_exit_4_with_counts_and_first_ticks() {
     eprintln!("{last}");
     assert_eq!(st.code(), Some(4), "{}", run.logs());
     assert_eq!(last, "rig: exit 4: 1 safe stop (first at tick 119), 200 refused torques (first at tick 100)");
+    // The applied torque names the answer it came from: this tick's before the refusals, the
+    // last accepted one (tick 99) while the plant holds or stops; a refused answer still came,
+    // so its own status is recorded.
+    let rec = run.recording();
+    assert_eq!(rec.joint_torque.len(), 300);
+    for r in &rec.joint_torque {
+        let (answered, status) = (r.torque.tick, r.torque.controller_status);
+        if r.tick < 100 {
+            assert!(!r.held && answered == r.tick && status == 0, "tick {}: held {}, answered {answered}, status {status}", r.tick, r.held);
+        } else {
+            assert!(r.held && answered == 99 && status == 0, "tick {}: held {}, answered {answered}, status {status}", r.tick, r.held);
+        }
+    }
 }
 
 /// Real time: `fault-controller --sleep-us 30000 --every 1 --sleep-from 300` answers every tick
@@ -447,6 +460,14 @@ fn a_slow_controller_s_safe_stop_gives_exit_4() {
     assert!((319..=330).contains(&first), "safe stop at the 20th miss after tick 300, not {first}: {last}");
     let rec = run.recording();
     assert!(rec.joint_state.iter().all(|s| s.tick <= 300 || s.total_misses + 300 >= s.tick), "every tick from 300 on is a miss (the state of tick k counts the misses before k)");
+    // No answer came in time for those ticks: the applied torque is recorded as no answer's,
+    // held from (or, in the safe stop, after) an answer to an earlier state.
+    let late: Vec<_> = rec.joint_torque.iter().filter(|r| r.tick > 300).collect();
+    assert!(!late.is_empty());
+    for r in late {
+        let (answered, status) = (r.torque.tick, r.torque.controller_status);
+        assert!(r.held && answered < r.tick && status == recordings::STATUS_NO_ANSWER, "tick {}: held {}, answered {answered}, status {status}", r.tick, r.held);
+    }
 }
 
 /// `rig sweep` with a controller that trips a reflex (lockstep, robot only, two cases): each case
