@@ -360,6 +360,10 @@ impl PlantLoop<'_> {
         // Tick of the state whose answer was last applied: what `/joint_torque.answered_tick`
         // records (the current tick when fresh, older when held).
         let mut applied_answer_tick = recordings::NEVER_ANSWERED;
+        // Overruns come in bursts on a stalling host: each is recorded in `/events`, but this
+        // SCHED_FIFO thread writes at most one log line per second of ticks about them.
+        let mut last_overrun_log: Option<(u64, u64)> = None;
+        let ticks_per_s = 1_000_000_000 / p.period_ns.max(1);
         // One reference instant for both clocks: Instant is CLOCK_MONOTONIC on Linux.
         let (origin, origin_ns) = (Instant::now(), rt::now_mono_ns());
         let at = |ns: u64| origin + Duration::from_nanos(ns.saturating_sub(origin_ns));
@@ -388,7 +392,11 @@ impl PlantLoop<'_> {
                     stats.overruns += skipped;
                     let mut s = StackText::new();
                     let _ = write!(s, "tick {tick}: loop {late_us} us late, skipped {skipped} periods");
-                    tracing::warn!("{}", s.as_str());
+                    if last_overrun_log.is_none_or(|(l, _)| tick >= l + ticks_per_s) {
+                        let since = last_overrun_log.map_or(0, |(_, n)| n);
+                        tracing::warn!("{} ({} overrun(s) since the last such line)", s.as_str(), stats.overruns - since);
+                        last_overrun_log = Some((tick, stats.overruns));
+                    }
                     self.event(tick, sim_t, EventKind::Info, s.as_str());
                 }
                 rt::sleep_until_mono_ns(next_deadline_ns);

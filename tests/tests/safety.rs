@@ -713,3 +713,31 @@ fn a_plant_stopped_for_300_ms_does_not_end_the_controller() {
     let rec = Recording::open_complete(t.recording()).unwrap();
     assert_eq!(rec.joint_state.len(), 2000);
 }
+
+/// Real time, robot only: the plant is stopped for 5 ms every 20 ms for 1 s (about 50 stalls,
+/// each an overrun). Every overrun is recorded in `/events`, but the plant's SCHED_FIFO thread
+/// writes at most one log line about them per second of ticks (it wrote one per overrun).
+#[test]
+fn a_stalling_host_s_overruns_are_all_recorded_but_logged_once_a_second() {
+    let _g = serial();
+    let t = TestRig::new("overrun-log", "realtime");
+    let (mut plant, mut ctrl) = t.running(3.0);
+    std::thread::sleep(Duration::from_millis(500));
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(1) {
+        plant.signal(libc::SIGSTOP);
+        std::thread::sleep(Duration::from_millis(5));
+        plant.signal(libc::SIGCONT);
+        std::thread::sleep(Duration::from_millis(15));
+    }
+    let ps = plant.expect_exit(LONG);
+    let _ = ctrl.expect_exit(Duration::from_secs(10));
+    assert!(ps.success(), "plant: {}", plant.stderr());
+    let rec = Recording::open_complete(t.recording()).unwrap();
+    let recorded = rec.events.iter().filter(|e| e.text.contains("periods") && e.text.contains("skipped")).count();
+    let logged = plant.stderr().lines().filter(|l| l.contains("skipped") && l.contains("periods")).count();
+    eprintln!("{recorded} overrun events recorded, {logged} log lines");
+    assert!(recorded >= 20, "about 50 stalls of 5 ms should give as many overruns, recorded {recorded}");
+    // 3 s of ticks: at most one line per second, and a line for the first overrun.
+    assert!((1..=3).contains(&logged), "{logged} overrun log lines for {recorded} overruns:\n{}", plant.stderr());
+}
