@@ -18,11 +18,35 @@ pub fn bin_dir() -> PathBuf {
     deps.parent().expect("profile dir").to_path_buf()
 }
 
-/// Path of a workspace binary; panics with the build command if it is missing.
+/// Path of a workspace binary; panics with the build command if it is missing or older than one
+/// of its sources (`rig` also checks the daemons it starts), so a test never runs stale code.
 pub fn bin(name: &str) -> PathBuf {
     let p = bin_dir().join(name);
     assert!(p.is_file(), "{} is missing: run `cargo build --release --workspace --bins` first", p.display());
+    let started = if name == "rig" { &["rig", "plant-sim", "controller"][..] } else { &[name][..] };
+    for b in started {
+        if let Some(newer) = source_newer_than_binary(b) {
+            panic!("{} is older than its source {}: run `cargo build --release --workspace --bins` first", bin_dir().join(b).display(), newer.display());
+        }
+    }
     p
+}
+
+/// A source file of binary `name` modified after the binary was built, from the dep-info file
+/// cargo writes beside it (`target/release/NAME.d`: `NAME: src1 src2 ...`, spaces escaped).
+pub fn source_newer_than_binary(name: &str) -> Option<PathBuf> {
+    source_newer_than(&bin_dir().join(name), &bin_dir().join(format!("{name}.d")))
+}
+
+fn source_newer_than(exe: &Path, dep_info: &Path) -> Option<PathBuf> {
+    let built = std::fs::metadata(exe).and_then(|m| m.modified()).ok()?;
+    let dep_info = std::fs::read_to_string(dep_info).ok()?;
+    let line = dep_info.lines().next()?;
+    let sources = line.split_once(": ")?.1.replace("\\ ", "\u{0}");
+    sources
+        .split_whitespace()
+        .map(|s| PathBuf::from(s.replace('\u{0}', " ")))
+        .find(|src| std::fs::metadata(src).and_then(|m| m.modified()).is_ok_and(|t| t > built))
 }
 
 /// A rig name unique to this test and process.
@@ -288,4 +312,31 @@ pub fn wall_ns() -> u64 {
 /// The first tick the plant published at or after the wall-clock time `ns` (from `/timing`).
 pub fn tick_at_wall_ns(rec: &recordings::read::Recording, ns: u64) -> Option<u64> {
     rec.timing.iter().find(|t| t.timing.publish_wall_ns >= ns).map(|t| t.tick)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::SystemTime;
+
+    /// A source modified after the binary (a space in its path included) is named; older sources
+    /// are not.
+    #[test]
+    fn a_source_newer_than_its_binary_is_found_from_the_dep_info() {
+        let d = temp_dir(&unique_rig("dep-info"));
+        let (exe, old_src, new_src) = (d.join("tool"), d.join("old.rs"), d.join("with space.rs"));
+        let at = |p: &Path, secs: u64| {
+            let f = std::fs::File::create(p).unwrap();
+            f.set_modified(SystemTime::UNIX_EPOCH + Duration::from_secs(secs)).unwrap();
+        };
+        at(&old_src, 1_000);
+        at(&exe, 2_000);
+        at(&new_src, 1_500);
+        let dep = d.join("tool.d");
+        let escaped = new_src.display().to_string().replace(' ', "\\ ");
+        std::fs::write(&dep, format!("{}: {} {escaped}\n", exe.display(), old_src.display())).unwrap();
+        assert_eq!(source_newer_than(&exe, &dep), None);
+        at(&new_src, 3_000);
+        assert_eq!(source_newer_than(&exe, &dep), Some(new_src));
+    }
 }
