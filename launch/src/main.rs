@@ -82,7 +82,7 @@ struct LiveArgs {
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = recordings::live::DEFAULT_ADDR)]
     live: Option<std::net::SocketAddr>,
     /// Per-tick channels of the live view at this rate, Hz of simulated time; 0 sends every tick.
-    #[arg(long, value_name = "HZ", default_value_t = recordings::live::DEFAULT_RATE_HZ, value_parser = hertz, requires = "live")]
+    #[arg(long, value_name = "HZ", allow_hyphen_values = true, default_value_t = recordings::live::DEFAULT_RATE_HZ, value_parser = hertz, requires = "live")]
     live_rate: f64,
 }
 
