@@ -5,7 +5,8 @@
 // can know by itself (every message decodes, ticks increase per channel, 6 joints, finite values)
 // and prints one JSON line for tests/tests/live_view.rs to compare with the recording.
 //
-// usage: node live_client.mjs ws://127.0.0.1:PORT SECONDS [TIMEOUT_S]
+// usage: node live_client.mjs ws://127.0.0.1:PORT SECONDS|all [TIMEOUT_S]
+// (`all`: stay subscribed until the server closes at the end of the run; measure.sh uses it)
 import wsProtocol from "@foxglove/ws-protocol";
 import { parse } from "@foxglove/rosmsg";
 import { MessageReader } from "@foxglove/rosmsg2-serialization";
@@ -18,7 +19,8 @@ if (!url || !secondsArg) {
   console.error("usage: node live_client.mjs ws://HOST:PORT SECONDS [TIMEOUT_S]");
   process.exit(2);
 }
-const wantNs = BigInt(Math.round(Number(secondsArg) * 1e9));
+const untilClose = secondsArg === "all";
+const wantNs = untilClose ? null : BigInt(Math.round(Number(secondsArg) * 1e9));
 const timeoutMs = Number(timeoutArg ?? 60) * 1000;
 
 function fail(why) {
@@ -58,6 +60,7 @@ client.on("serverInfo", (info) => {
   serverName = info.name;
 });
 client.on("close", () => {
+  if (untilClose && !done) finish();
   if (!done) fail(`the server closed the connection before ${secondsArg} s of /joint_state: ${JSON.stringify(topics)}`);
 });
 client.on("advertise", (channels) => {
@@ -102,7 +105,7 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
       if (!v.every(Number.isFinite)) fail(`/joint_state tick ${msg.tick}: ${key} not finite: ${v}`);
     }
     if (samples.length < 500) samples.push({ tick: Number(msg.tick), sim_time: msg.sim_time, q: Array.from(msg.q) });
-    if (BigInt(t.lastLogNs) - BigInt(t.firstLogNs) >= wantNs) finish();
+    if (!untilClose && BigInt(t.lastLogNs) - BigInt(t.firstLogNs) >= wantNs) finish();
   }
 });
 
