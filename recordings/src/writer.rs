@@ -14,6 +14,9 @@
 //! (no reserve on this file system, EFBIG, EIO) cuts the file back to its last complete chunk and
 //! ends it the same way if it can. Either way [`RecordingSummary::stopped_early`] says why and the
 //! writer keeps draining the queue, so the loop never notices.
+//!
+//! With [`RecorderConfig::live`] the writer also offers every message it writes to the live view
+//! ([`crate::live`]): a bounded queue to a thread of its own that serves Foxglove clients.
 
 use crate::live::{LiveChannel, LiveConfig, LiveError, LiveSummary, LiveView};
 use crate::schema::{self, TickHead, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
