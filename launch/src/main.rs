@@ -88,7 +88,7 @@ struct LiveArgs {
 
 impl LiveArgs {
     fn config(&self) -> Option<recordings::LiveConfig> {
-        self.live.map(|addr| recordings::LiveConfig { addr, rate_hz: self.live_rate })
+        self.live.map(|addr| recordings::LiveConfig { addr, rate_hz: self.live_rate, ..Default::default() })
     }
 }
 

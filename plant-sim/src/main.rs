@@ -53,7 +53,7 @@ fn main() {
         duration_s: a.duration,
         out: a.out,
         cache_dir: a.cache_dir.unwrap_or_else(strip::cache::cache_dir),
-        live: a.live.map(|addr| recordings::LiveConfig { addr, rate_hz: a.live_rate }),
+        live: a.live.map(|addr| recordings::LiveConfig { addr, rate_hz: a.live_rate, ..Default::default() }),
     };
     match plant_sim::run::run(&opts) {
         // Both writes tolerate a closed pipe: a launcher killed with SIGKILL leaves its end closed.

@@ -36,11 +36,13 @@ pub struct LiveConfig {
     /// Per-tick channels are decimated to this rate, in messages per second of log time;
     /// 0 sends every tick. Event channels are never decimated.
     pub rate_hz: f64,
+    /// Messages the queue from the writer to the live-view thread holds ([`QUEUE_CAPACITY`]).
+    pub queue_capacity: usize,
 }
 
 impl Default for LiveConfig {
     fn default() -> Self {
-        Self { addr: DEFAULT_ADDR.parse().expect("a socket address"), rate_hz: DEFAULT_RATE_HZ }
+        Self { addr: DEFAULT_ADDR.parse().expect("a socket address"), rate_hz: DEFAULT_RATE_HZ, queue_capacity: QUEUE_CAPACITY }
     }
 }
 
@@ -113,7 +115,7 @@ impl LiveView {
         let addr = cfg.addr;
         let name = server_name.to_string();
         let serve_err = move |cause: String| LiveError::Serve { addr, cause };
-        let (tx, rx) = mpsc::sync_channel::<Msg>(QUEUE_CAPACITY);
+        let (tx, rx) = mpsc::sync_channel::<Msg>(cfg.queue_capacity.max(1));
         let (ready_tx, ready_rx) = mpsc::channel();
         let thread = std::thread::Builder::new()
             .name("live-view".into())
@@ -252,4 +254,132 @@ fn serve(addr: SocketAddr, name: &str, channels: Vec<(String, Schema, String)>, 
 
 fn error_chain(e: &dyn std::error::Error) -> String {
     crate::writer::error_chain(e)
+}
+
+#[cfg(test)]
+mod tests {
+    //! Against a plain WebSocket client (`tungstenite`) speaking the Foxglove protocol by hand:
+    //! JSON `advertise` / `subscribe`, binary message frames (opcode 1, subscription id, log time).
+    use super::*;
+    use std::collections::HashMap;
+    use std::net::TcpStream;
+    use std::time::Instant;
+    use tungstenite::client::IntoClientRequest;
+    use tungstenite::stream::MaybeTlsStream;
+    use tungstenite::{Message, WebSocket};
+
+    type Client = WebSocket<MaybeTlsStream<TcpStream>>;
+
+    const TICKS: LiveChannel<'static> =
+        LiveChannel { topic: "/ticks", schema_name: "t/msg/Tick", schema_encoding: "ros2msg", schema: b"uint64 tick\n", message_encoding: "cdr" };
+    const EVENTS: LiveChannel<'static> =
+        LiveChannel { topic: "/events", schema_name: "t/msg/Event", schema_encoding: "ros2msg", schema: b"string text\n", message_encoding: "cdr" };
+
+    fn start(rate_hz: f64, queue_capacity: usize) -> LiveView {
+        let cfg = LiveConfig { addr: "127.0.0.1:0".parse().unwrap(), rate_hz, queue_capacity };
+        LiveView::start(&cfg, "unit test", &[TICKS, EVENTS]).unwrap()
+    }
+
+    /// Connects, subscribes to every advertised channel and waits until the server has the
+    /// subscriptions; returns the topic of each subscription id.
+    fn subscribe(live: &LiveView) -> (Client, HashMap<u32, String>) {
+        let mut req = format!("ws://{}", live.local_addr()).into_client_request().unwrap();
+        req.headers_mut().insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
+        let (mut ws, _) = tungstenite::connect(req).unwrap();
+        let channels = loop {
+            if let Message::Text(t) = ws.read().unwrap() {
+                let v: serde_json::Value = serde_json::from_str(&t).unwrap();
+                if v["op"] == "advertise" {
+                    break v["channels"].as_array().unwrap().clone();
+                }
+            }
+        };
+        let mut topics = HashMap::new();
+        let subs: Vec<serde_json::Value> = channels
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                topics.insert(i as u32 + 1, c["topic"].as_str().unwrap().to_string());
+                serde_json::json!({"id": i + 1, "channelId": c["id"]})
+            })
+            .collect();
+        assert_eq!(subs.len(), 2, "{channels:?}");
+        ws.send(Message::text(serde_json::json!({"op": "subscribe", "subscriptions": subs}).to_string())).unwrap();
+        let t0 = Instant::now();
+        while !live.channels.iter().all(|c| c.has_sinks()) {
+            assert!(t0.elapsed() < Duration::from_secs(10), "the server never had the subscriptions");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        if let MaybeTlsStream::Plain(s) = ws.get_mut() {
+            s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        }
+        (ws, topics)
+    }
+
+    /// Binary message frames until `n` arrived: (topic, log time, payload).
+    fn receive(ws: &mut Client, topics: &HashMap<u32, String>, n: usize) -> Vec<(String, u64, Vec<u8>)> {
+        let mut got = Vec::new();
+        while got.len() < n {
+            match ws.read() {
+                Ok(Message::Binary(b)) if b[0] == 1 => {
+                    let sub = u32::from_le_bytes(b[1..5].try_into().unwrap());
+                    let t = u64::from_le_bytes(b[5..13].try_into().unwrap());
+                    got.push((topics[&sub].clone(), t, b[13..].to_vec()));
+                }
+                Ok(_) => {}
+                Err(e) => panic!("after {} of {n} messages: {e}", got.len()),
+            }
+        }
+        got
+    }
+
+    #[test]
+    fn decimates_a_per_tick_channel_on_the_rate_grid_and_sends_events_whole() {
+        let mut live = start(100.0, QUEUE_CAPACITY);
+        let (mut ws, topics) = subscribe(&live);
+        // one second of 1 kHz ticks, three events in its first milliseconds
+        for k in 0..1000u64 {
+            live.offer(0, k * 1_000_000, &k.to_le_bytes(), true);
+            if (1..=3).contains(&k) {
+                live.offer(1, k * 1_000_000, format!("event {k}").as_bytes(), false);
+            }
+        }
+        let got = receive(&mut ws, &topics, 103);
+        let ticks: Vec<(u64, u64)> =
+            got.iter().filter(|m| m.0 == "/ticks").map(|m| (m.1, u64::from_le_bytes(m.2[..].try_into().unwrap()))).collect();
+        let expected: Vec<(u64, u64)> = (0..100u64).map(|i| (i * 10_000_000, i * 10)).collect();
+        assert_eq!(ticks, expected, "every 10th tick, at its log time, its bytes");
+        let events: Vec<(u64, Vec<u8>)> = got.iter().filter(|m| m.0 == "/events").map(|m| (m.1, m.2.clone())).collect();
+        assert_eq!(events, (1..=3u64).map(|k| (k * 1_000_000, format!("event {k}").into_bytes())).collect::<Vec<_>>());
+        assert_eq!(live.finish(), LiveSummary { sent: 103, dropped: 0 });
+    }
+
+    #[test]
+    fn a_full_queue_drops_and_counts_instead_of_waiting() {
+        let mut live = start(0.0, 4);
+        let (_ws, _) = subscribe(&live);
+        let n = 20_000u64;
+        for k in 0..n {
+            live.offer(0, k * 1_000_000, &k.to_le_bytes(), true);
+        }
+        let s = live.finish();
+        assert_eq!(s.sent + s.dropped, n, "{s:?}");
+        assert!(s.dropped > 0, "4 slots took {n} messages offered back to back: {s:?}");
+    }
+
+    #[test]
+    fn nothing_is_copied_or_counted_without_a_subscriber() {
+        let mut live = start(0.0, 4);
+        for k in 0..1000u64 {
+            live.offer(0, k * 1_000_000, &k.to_le_bytes(), true);
+        }
+        assert_eq!(live.finish(), LiveSummary::default());
+    }
+
+    #[test]
+    fn a_negative_rate_is_refused() {
+        let cfg = LiveConfig { rate_hz: -1.0, ..LiveConfig::default() };
+        let e = LiveView::start(&cfg, "unit test", &[TICKS]).err().expect("refused");
+        assert_eq!(e.to_string(), "live view: --live-rate -1: must be a finite number of Hz >= 0");
+    }
 }
