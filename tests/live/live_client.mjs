@@ -104,7 +104,7 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
       if (v.length !== 6) fail(`/joint_state tick ${msg.tick}: ${key} has ${v.length} joints, not 6`);
       if (!v.every(Number.isFinite)) fail(`/joint_state tick ${msg.tick}: ${key} not finite: ${v}`);
     }
-    if (samples.length < 500) samples.push({ tick: Number(msg.tick), sim_time: msg.sim_time, q: Array.from(msg.q) });
+    if (samples.length < 200) samples.push({ tick: Number(msg.tick), sim_time: msg.sim_time, q: Array.from(msg.q) });
     if (!untilClose && BigInt(t.lastLogNs) - BigInt(t.firstLogNs) >= wantNs) finish();
   }
 });
@@ -112,7 +112,7 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
 function finish() {
   done = true;
   clearTimeout(timer);
-  console.log(JSON.stringify({ serverName, advertised, topics, samples }));
   client.close();
-  process.exit(0);
+  // exit once the report is out: a pipe takes 64 KiB at once, process.exit would cut the rest
+  process.stdout.write(JSON.stringify({ serverName, advertised, topics, samples }) + "\n", () => process.exit(0));
 }
