@@ -1,8 +1,9 @@
 //! `rig`: the user's front door to the weatherstrip rig.
 //!
-//! - `rig run [SCENARIO.toml] [--mode realtime|lockstep] [--controller PATH] [--duration S] [--out DIR]`
-//!   starts `plant-sim` and a controller on a fresh rig name, supervises them and prints a summary.
-//! - `rig timing [--seconds N]`: a real-time timing run with latency and jitter distributions.
+//! - `rig run [SCENARIO.toml] [--mode realtime|lockstep] [--controller PATH] [--duration S] [--out DIR]
+//!   [--live [ADDR]] [--live-rate HZ]` starts `plant-sim` and a controller on a fresh rig name,
+//!   supervises them and prints a summary; `--live` serves the run to Foxglove as it goes.
+//! - `rig timing [--seconds N] [--live [ADDR]]`: a real-time timing run with latency and jitter distributions.
 //! - `rig sweep [SCENARIO.toml] --set section.field=v1,v2,... [--grid]`: a parameter study, one
 //!   lockstep run per case, tabulated from the recordings.
 //! - `rig robot ...`, `rig model ...`, `rig replay`, `rig report`, `rig compare`, `rig design`: the tools of the
@@ -69,6 +70,26 @@ struct RunArgs {
     set: Vec<sweep::Axis>,
     #[command(flatten)]
     launch: LaunchArgs,
+    #[command(flatten)]
+    live: LiveArgs,
+}
+
+/// The live view of `rig run` and `rig timing` (recordings/README.md, "Live view").
+#[derive(Debug, clap::Args)]
+struct LiveArgs {
+    /// Serve the run's channels over the Foxglove WebSocket protocol while it runs, on ADDR
+    /// (IP:PORT; default 127.0.0.1:8765, loopback only). Give the scenario before this flag.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = recordings::live::DEFAULT_ADDR)]
+    live: Option<std::net::SocketAddr>,
+    /// Per-tick channels of the live view at this rate, Hz of simulated time; 0 sends every tick.
+    #[arg(long, value_name = "HZ", allow_hyphen_values = true, default_value_t = recordings::live::DEFAULT_RATE_HZ, value_parser = hertz, requires = "live")]
+    live_rate: f64,
+}
+
+impl LiveArgs {
+    fn config(&self) -> Option<recordings::LiveConfig> {
+        self.live.map(|addr| recordings::LiveConfig { addr, rate_hz: self.live_rate, ..Default::default() })
+    }
 }
 
 /// What `rig run` and `rig sweep` start and where they write.
@@ -114,6 +135,8 @@ struct TimingArgs {
     /// Let idle CPUs halt (do not hold /dev/cpu_dma_latency at 0; scenario `loop.idle_poll`).
     #[arg(long)]
     no_idle_poll: bool,
+    #[command(flatten)]
+    live: LiveArgs,
 }
 
 #[derive(Debug, clap::Args)]
@@ -149,6 +172,22 @@ fn seconds(s: &str) -> Result<f64, String> {
 /// torque budget).
 fn microseconds(s: &str) -> Result<f64, String> {
     flag_number(s, true, "µs")
+}
+
+/// The live view's rate, Hz (0: every tick).
+fn hertz(s: &str) -> Result<f64, String> {
+    flag_number(s, true, "Hz")
+}
+
+/// `--live ADDR` must be free to listen on before anything starts (the plant binds it again
+/// itself; a port taken in between fails the plant with the same message).
+fn check_live(live: &recordings::LiveConfig, s: &scenario::Scenario, path: &Path) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        s.recording.enabled,
+        "--live: the live view is fed by the recorder, and {} disables the recording (recording.enabled = false)",
+        path.display()
+    );
+    std::net::TcpListener::bind(live.addr).map(drop).with_context(|| format!("--live {}: cannot listen there", live.addr))
 }
 
 /// A run length from the command line must give the plant at least one tick of the scenario's
@@ -198,10 +237,14 @@ fn prepare(
     (duration_flag, duration_s): (&str, Option<f64>),
     out: Option<PathBuf>,
     controller: Option<PathBuf>,
+    live: Option<recordings::LiveConfig>,
 ) -> anyhow::Result<RigLaunch> {
     // Fail early, with file/line/field, before any process starts.
     let parsed = scenario::Scenario::load(&scenario)?;
     check_duration(duration_flag, duration_s, &parsed, &scenario)?;
+    if let Some(l) = &live {
+        check_live(l, &parsed, &scenario)?;
+    }
     if let Some(p) = &controller {
         check_controller(p)?;
     }
@@ -230,6 +273,7 @@ fn prepare(
         // Same CPU as plant-sim's lockstep loop.
         controller_cpu: lockstep.then(plant_sim::rt::lockstep_cpu),
         quiet: false,
+        live,
     })
 }
 
@@ -346,7 +390,7 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
     let mut results = Vec::with_capacity(cases.len());
     let mut interrupted = None;
     for (n, (case_dir, path, label)) in planned.into_iter().enumerate() {
-        let mut l = prepare(supervise::unique_rig_name(), path.clone(), Some("lockstep".into()), ("--duration", a.launch.duration), Some(case_dir), a.launch.controller.clone())?;
+        let mut l = prepare(supervise::unique_rig_name(), path.clone(), Some("lockstep".into()), ("--duration", a.launch.duration), Some(case_dir), a.launch.controller.clone(), None)?;
         l.quiet = true;
         eprintln!("rig sweep: case {}/{}: {label}", n + 1, cases.len());
         let outcome = rt.block_on(supervise::supervise(&l))?;
@@ -399,7 +443,7 @@ fn main() {
             if !a.set.is_empty() {
                 scenario = sweep::write_overridden(&scenario, &a.set, &dir.join("scenario.toml"))?;
             }
-            let l = prepare(rig, scenario, a.mode, ("--duration", a.launch.duration), Some(dir), a.launch.controller)?;
+            let l = prepare(rig, scenario, a.mode, ("--duration", a.launch.duration), Some(dir), a.launch.controller, a.live.config())?;
             launch_and_report(&l, false, None)
         })(),
         Cmd::Timing(a) => (|| {
@@ -426,7 +470,8 @@ fn main() {
                     path
                 }
             };
-            let l = prepare(rig, scenario, Some("realtime".into()), ("--seconds", Some(a.seconds)), Some(dir), a.controller)?;
+            let live = a.live.config();
+            let l = prepare(rig, scenario, Some("realtime".into()), ("--seconds", Some(a.seconds)), Some(dir), a.controller, live)?;
             launch_and_report(&l, true, a.json.as_deref())
         })(),
         Cmd::Sweep(a) => run_sweep(a),

@@ -37,6 +37,14 @@ pub fn run_summary(v: &Value) -> String {
         num(v, "wall_s"),
         num(v, "speed_factor")
     );
+    if let Some(live) = v.get("live").filter(|l| !l.is_null()) {
+        s += &format!(
+            "live view   ws://{}  {} messages sent, {} dropped\n",
+            live.get("addr").and_then(Value::as_str).unwrap_or("?"),
+            int(live, "sent"),
+            int(live, "dropped")
+        );
+    }
     s
 }
 

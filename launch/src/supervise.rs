@@ -25,6 +25,8 @@ pub struct RigLaunch {
     pub controller_cpu: Option<usize>,
     /// Daemons log warnings and errors only (unless RUST_LOG says otherwise): for `rig sweep`.
     pub quiet: bool,
+    /// The plant serves its recording live (`--live ADDR --live-rate HZ`).
+    pub live: Option<recordings::LiveConfig>,
 }
 
 /// How a supervised run ended.
@@ -246,6 +248,9 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     }
     if let Some(d) = l.duration_s {
         plant_cmd.arg("--duration").arg(d.to_string());
+    }
+    if let Some(live) = &l.live {
+        plant_cmd.arg("--live").arg(live.addr.to_string()).arg("--live-rate").arg(live.rate_hz.to_string());
     }
     let mut plant = spawn(&mut plant_cmd, "plant", &l.plant_bin)?;
     let mut plant_out = plant.stdout.take().context("plant stdout")?;

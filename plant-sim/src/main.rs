@@ -1,4 +1,5 @@
-//! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR]`
+//! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR]
+//! [--live ADDR [--live-rate HZ]]`
 //!
 //! Runs the plant daemon; at exit prints one line of JSON with the run's summary on stdout.
 //! Exit status: 0 run completed, 1 error, 69 the rig name is held by a live plant, 71 shared
@@ -32,6 +33,13 @@ struct Args {
     /// else `~/.cache/rig/strip`).
     #[arg(long)]
     cache_dir: Option<PathBuf>,
+    /// Serve the recording's channels over the Foxglove WebSocket protocol on this address
+    /// (`rig run --live` passes 127.0.0.1:8765 unless told otherwise).
+    #[arg(long)]
+    live: Option<std::net::SocketAddr>,
+    /// Per-tick channels of the live view at this rate, Hz of simulated time; 0: every tick.
+    #[arg(long, default_value_t = recordings::live::DEFAULT_RATE_HZ, requires = "live")]
+    live_rate: f64,
 }
 
 fn main() {
@@ -45,6 +53,7 @@ fn main() {
         duration_s: a.duration,
         out: a.out,
         cache_dir: a.cache_dir.unwrap_or_else(strip::cache::cache_dir),
+        live: a.live.map(|addr| recordings::LiveConfig { addr, rate_hz: a.live_rate, ..Default::default() }),
     };
     match plant_sim::run::run(&opts) {
         // Both writes tolerate a closed pipe: a launcher killed with SIGKILL leaves its end closed.

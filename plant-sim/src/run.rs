@@ -28,6 +28,8 @@ pub struct RunOptions {
     /// MCAP file; None = `runs/<unix time>-<rig>/run.mcap`.
     pub out: Option<PathBuf>,
     pub cache_dir: PathBuf,
+    /// Serve the recording's channels live (Foxglove WebSocket); needs the recording enabled.
+    pub live: Option<recordings::LiveConfig>,
 }
 
 /// Run length when neither the command line nor the scenario sets one: the nominal trajectory
@@ -55,6 +57,8 @@ pub struct RunSummary {
     pub recording_stopped_early: Option<String>,
     pub mode: Mode,
     pub rt: rt::RtSetup,
+    /// The live view's address and what it sent and dropped, if it ran.
+    pub live: Option<(std::net::SocketAddr, recordings::LiveSummary)>,
 }
 
 impl RunSummary {
@@ -82,6 +86,7 @@ impl RunSummary {
             "recording": self.recording.as_ref().map(|p| p.display().to_string()),
             "drops": self.drops,
             "recording_stopped_early": self.recording_stopped_early,
+            "live": self.live.map(|(addr, l)| serde_json::json!({"addr": addr.to_string(), "sent": l.sent, "dropped": l.dropped})),
             "wall_s": s.wall_s,
             "sim_s": s.sim_s,
             "speed_factor": if s.active_wall_s > 0.0 { s.active_sim_s / s.active_wall_s } else { 0.0 },
@@ -157,6 +162,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     if mode == Mode::Lockstep && !rt::keep_thread_off_cpu(lockstep_cpu) {
         tracing::warn!("could not keep the recorder off the lockstep CPU {lockstep_cpu}");
     }
+    anyhow::ensure!(
+        opts.live.is_none() || scenario.recording.enabled,
+        "--live: the live view is fed by the recorder, and {} disables the recording (recording.enabled = false)",
+        opts.scenario_path.display()
+    );
     let recording = scenario.recording.enabled.then(|| opts.out.clone().unwrap_or_else(|| default_recording_path(&opts.rig)));
     let mut recorder = match &recording {
         Some(path) => {
@@ -182,6 +192,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
                 queue_capacity: scenario.recording.queue_capacity,
                 chunk_size_bytes: scenario.recording.chunk_size_bytes,
                 metadata,
+                live: opts.live.clone(),
             };
             Some(Recorder::start(cfg).with_context(|| format!("starting the recorder on {}", path.display()))?)
         }
@@ -246,10 +257,14 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
     }
     let drops = recorder.as_ref().map_or(0, |r| r.dropped());
-    let recording_stopped_early = match recorder {
-        Some(r) => r.finish().context("finishing the recording")?.stopped_early,
-        None => None,
+    let live_addr = recorder.as_ref().and_then(|r| r.live_addr());
+    let (recording_stopped_early, live) = match recorder {
+        Some(r) => {
+            let s = r.finish().context("finishing the recording")?;
+            (s.stopped_early, live_addr.zip(s.live))
+        }
+        None => (None, None),
     };
     tracing::info!(ticks = stats.ticks, misses = stats.misses, safe_stops = stats.safe_stops, "plant stopped");
-    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup })
+    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live })
 }

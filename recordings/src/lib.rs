@@ -14,6 +14,7 @@
 pub mod cdr;
 pub mod cli;
 pub mod compare;
+pub mod live;
 pub mod plots;
 pub mod read;
 pub mod replay;
@@ -23,6 +24,7 @@ pub mod synthetic;
 pub mod tmpfs_test;
 mod writer;
 
+pub use live::{LiveConfig, LiveSummary};
 pub use writer::{Recorder, RecorderConfig, RecorderError, RecorderTuning, RecordingSummary};
 
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, DOF};

@@ -14,7 +14,11 @@
 //! (no reserve on this file system, EFBIG, EIO) cuts the file back to its last complete chunk and
 //! ends it the same way if it can. Either way [`RecordingSummary::stopped_early`] says why and the
 //! writer keeps draining the queue, so the loop never notices.
+//!
+//! With [`RecorderConfig::live`] the writer also offers every message it writes to the live view
+//! ([`crate::live`]): a bounded queue to a thread of its own that serves Foxglove clients.
 
+use crate::live::{LiveChannel, LiveConfig, LiveError, LiveSummary, LiveView};
 use crate::schema::{self, TickHead, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::{sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, MAX_CENTRELINE, RECORDING_FORMAT_VERSION};
 use std::mem::MaybeUninit;
@@ -41,6 +45,8 @@ pub struct RecorderConfig {
     /// Written once as MCAP metadata `rig`: rig name, mode, scenario TOML text, `centreline_z_m`
     /// (JSON array of the centre-line nodes' z in m, also repeated in every `/strip` message).
     pub metadata: Vec<(String, String)>,
+    /// Serve the channels live over the Foxglove WebSocket protocol as they are written.
+    pub live: Option<LiveConfig>,
 }
 
 impl RecorderConfig {
@@ -53,6 +59,7 @@ impl RecorderConfig {
             queue_capacity: Self::DEFAULT_QUEUE_CAPACITY,
             chunk_size_bytes: Self::DEFAULT_CHUNK_SIZE_BYTES,
             metadata: Vec::new(),
+            live: None,
         }
     }
 }
@@ -97,6 +104,8 @@ pub enum RecorderError {
     Config { path: PathBuf, what: String },
     #[error("recording {path}: the writer thread panicked")]
     WriterPanicked { path: PathBuf },
+    #[error(transparent)]
+    Live(#[from] LiveError),
 }
 
 /// What [`Recorder::finish`] reports.
@@ -118,6 +127,8 @@ pub struct RecordingSummary {
     pub finalised: bool,
     /// File size, bytes.
     pub bytes: u64,
+    /// What the live view sent and dropped, if it ran.
+    pub live: Option<LiveSummary>,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -151,6 +162,7 @@ pub struct Recorder {
     shared: Arc<Shared>,
     thread: Option<JoinHandle<RecordingSummary>>,
     path: PathBuf,
+    live_addr: Option<std::net::SocketAddr>,
 }
 
 type McapFile = mcap::Writer<BufWriter<SlicedFile>>;
@@ -221,6 +233,24 @@ impl Recorder {
             Some((_, v)) => schema::parse_centreline_z(v).map_err(config_err)?,
             None => Vec::new(),
         };
+        // The live view first: an address it cannot serve on ends the start before a file exists.
+        let live = match &cfg.live {
+            Some(live_cfg) => {
+                let name = cfg.metadata.iter().find(|(k, _)| k == "rig").map_or("rig", |(_, v)| v.as_str());
+                let channels: Vec<LiveChannel<'_>> = CHANNELS
+                    .iter()
+                    .map(|ch| LiveChannel {
+                        topic: ch.topic,
+                        schema_name: ch.schema_name,
+                        schema_encoding: SCHEMA_ENCODING,
+                        schema: ch.schema_text.as_bytes(),
+                        message_encoding: MESSAGE_ENCODING,
+                    })
+                    .collect();
+                Some(LiveView::start(live_cfg, &format!("rig {name}"), &channels)?)
+            }
+            None => None,
+        };
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|source| RecorderError::Create { path: path.clone(), cause: source })?;
         }
@@ -264,6 +294,7 @@ impl Recorder {
         }
         while consumer.pop().is_ok() {}
         let shared = Arc::new(Shared::default());
+        let live_addr = live.as_ref().map(LiveView::local_addr);
         let reserve = tuning.tail_reserve_bytes.unwrap_or(2 * cfg.chunk_size_bytes + (64 << 10));
         let mut writer = WriterThread {
             mcap: Some(mcap),
@@ -289,12 +320,13 @@ impl Recorder {
             tally,
             kept: Kept::default(),
             reserve,
+            live,
         };
         let thread = std::thread::Builder::new()
             .name("recorder".into())
             .spawn(move || writer.run())
             .map_err(|source| RecorderError::Create { path: path.clone(), cause: source })?;
-        Ok(Self { producer: Some(producer), shared, thread: Some(thread), path })
+        Ok(Self { producer: Some(producer), shared, thread: Some(thread), path, live_addr })
     }
 
     /// Queues one tick. Wait-free; returns false (and counts a drop) if the queue is full.
@@ -370,6 +402,11 @@ impl Recorder {
         &self.path
     }
 
+    /// Where the live view listens, if it runs.
+    pub fn live_addr(&self) -> Option<std::net::SocketAddr> {
+        self.live_addr
+    }
+
     /// Drains the queue, writes the drop counters, summary, index and footer, joins the writer.
     pub fn finish(mut self) -> Result<RecordingSummary, RecorderError> {
         self.join()
@@ -431,6 +468,8 @@ struct WriterThread {
     kept: Kept,
     /// Bytes to keep allocated past the end of the file (0: none, or not supported here).
     reserve: u64,
+    /// The live view, offered every message written.
+    live: Option<LiveView>,
 }
 
 /// The state at the end of the last complete chunk: what a write error falls back to.
@@ -466,6 +505,7 @@ impl WriterThread {
             }
         }
         self.finalise();
+        let live = self.live.take().map(LiveView::finish);
         let finalised = self.finalised;
         let bytes = std::fs::metadata(&self.path).map(|m| m.len()).unwrap_or(0);
         RecordingSummary {
@@ -478,6 +518,7 @@ impl WriterThread {
             stopped_early: self.stopped_early.clone(),
             finalised,
             bytes,
+            live,
         }
     }
 
@@ -520,12 +561,16 @@ impl WriterThread {
         let log_time = sim_time_ns(r.state.sim_time_s);
         let publish_time = if r.timing.publish_wall_ns != 0 { r.timing.publish_wall_ns } else { wall_clock_ns() };
         let dropped = self.shared.dropped_ticks.load(Ordering::Relaxed) + self.shared.dropped_events.load(Ordering::Relaxed);
-        let Self { mcap, channel_ids, buf, centreline_z, pressure, bytes_since_flush, .. } = self;
+        let Self { mcap, channel_ids, buf, centreline_z, pressure, bytes_since_flush, live, .. } = self;
         let mcap = mcap.as_mut().expect("checked by handle");
         let mut put = |ch: usize, buf: &Vec<u8>| -> Result<(), mcap::McapError> {
             *bytes_since_flush += buf.len() as u64 + 31; // + message record header
             let header = MessageHeader { channel_id: channel_ids[ch], sequence: r.state.tick as u32, log_time, publish_time };
-            mcap.write_to_known_channel(&header, buf)
+            mcap.write_to_known_channel(&header, buf)?;
+            if let Some(live) = live.as_mut() {
+                live.offer(ch, log_time, buf, true);
+            }
+            Ok(())
         };
         schema::encode_joint_state(buf, r);
         put(0, buf)?;
@@ -557,6 +602,9 @@ impl WriterThread {
             publish_time: e.wall_ns,
         };
         self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
+        if let Some(live) = self.live.as_mut() {
+            live.offer(6, header.log_time, &self.buf, false);
+        }
         self.events_written += 1;
         Ok(())
     }
@@ -748,6 +796,10 @@ impl WriterThread {
         meta.insert("last_tick".to_string(), if self.mcap.is_some() { self.last_tick } else { self.kept.last_tick }.to_string());
         meta.insert("stopped_early".to_string(), self.stopped_early.clone().unwrap_or_default());
         meta.insert("finished_wall_ns".to_string(), wall_clock_ns().to_string());
+        if let Some(live) = self.live.as_ref().map(LiveView::summary) {
+            meta.insert("live_sent".to_string(), live.sent.to_string());
+            meta.insert("live_dropped".to_string(), live.dropped.to_string());
+        }
         meta
     }
 
