@@ -18,6 +18,7 @@ pub mod plots;
 pub mod read;
 pub mod replay;
 pub mod report;
+pub mod scene;
 pub mod schema;
 pub mod synthetic;
 pub mod tmpfs_test;
@@ -30,8 +31,12 @@ use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, DOF};
 /// Most centre-line nodes a [`StripRecord`] carries (the 0.5 mm mesh of a 40 mm strip has 81).
 pub const MAX_CENTRELINE: usize = 256;
 
+/// MCAP header profile of the files this crate writes: ROS 2 channels (`cdr`, `ros2msg`) and
+/// Foxglove channels (`protobuf`), log time = the run's wall-clock start + simulated time.
+pub const RECORDING_PROFILE: &str = "rig-weatherstrip";
+
 /// Format version of the files this crate writes (metadata `rig/recording_format`).
-pub const RECORDING_FORMAT_VERSION: u32 = 1;
+pub const RECORDING_FORMAT_VERSION: u32 = 2;
 
 /// Everything recorded for one tick. Fixed size and `Copy`, so the plant fills it on the stack and
 /// the queue copies it without touching the heap.
@@ -70,6 +75,10 @@ pub struct StripRecord {
     /// Bottom pressure at the centre-line nodes (x = 0), ordered by z, Pa. The nodes' z go once
     /// into the recording's metadata (key `centreline_z_m`, a JSON array of m).
     pub centreline_pressure_pa: [f64; MAX_CENTRELINE],
+    /// Normal (task +y) displacement of the top surface's centre line (the bulb's crest, x = 0)
+    /// at the same z as `centreline_pressure_pa`, m, bulge included; `n_centreline` valid. Drawn
+    /// by the decimated `/strip_scene` only (the per-tick `/strip` schema is unchanged).
+    pub top_centreline_uy_m: [f64; MAX_CENTRELINE],
 }
 
 /// Loop timing of one tick. Wall-clock times are CLOCK_REALTIME ns since the Unix epoch.
@@ -216,6 +225,7 @@ impl Default for StripRecord {
             top_displacement_m: 0.0,
             n_centreline: 0,
             centreline_pressure_pa: [0.0; MAX_CENTRELINE],
+            top_centreline_uy_m: [0.0; MAX_CENTRELINE],
         }
     }
 }

@@ -362,7 +362,7 @@ pub struct EventRow {
     pub kind: Option<EventKind>,
     pub kind_name: String,
     pub text: String,
-    /// MCAP publish time (wall clock), ns.
+    /// MCAP publish time, ns: the run's wall-clock start + the event's simulated time.
     pub wall_ns: u64,
 }
 

@@ -41,6 +41,11 @@ pub struct RecorderConfig {
     /// Written once as MCAP metadata `rig`: rig name, mode, scenario TOML text, `centreline_z_m`
     /// (JSON array of the centre-line nodes' z in m, also repeated in every `/strip` message).
     pub metadata: Vec<(String, String)>,
+    /// What Foxglove draws (URDF, transforms, strip scene; [`crate::scene`]); None: only the
+    /// URDF-less channels (`/log` is written either way).
+    pub scene: Option<crate::scene::SceneConfig>,
+    /// Control period, s: the decimation of the scene (every `round(1 / (rate T))`-th tick).
+    pub period_s: f64,
 }
 
 impl RecorderConfig {
@@ -53,6 +58,8 @@ impl RecorderConfig {
             queue_capacity: Self::DEFAULT_QUEUE_CAPACITY,
             chunk_size_bytes: Self::DEFAULT_CHUNK_SIZE_BYTES,
             metadata: Vec::new(),
+            scene: None,
+            period_s: 1e-3,
         }
     }
 }
@@ -136,6 +143,7 @@ struct Slot {
     tick: MaybeUninit<TickHead>,
     event: MaybeUninit<EventRecord>,
     pressure_pa: [MaybeUninit<f32>; MAX_CENTRELINE],
+    top_uy_m: [MaybeUninit<f32>; MAX_CENTRELINE],
 }
 
 #[derive(Default)]
@@ -237,6 +245,9 @@ impl Recorder {
             .chunk_size(None)
             .disable_seeking(true)
             .library(format!("rig-recordings {}", env!("CARGO_PKG_VERSION")))
+            // Not `ros2`: that profile wants every channel cdr + ros2msg, and the Foxglove
+            // channels are protobuf. Ours says what to expect (recordings/README.md).
+            .profile(crate::RECORDING_PROFILE)
             .create(BufWriter::with_capacity(WRITE_SLICE_BYTES, SlicedFile(file, tally.clone())))
             .map_err(mcap_err)?;
         let mut channel_ids = [0u16; CHANNELS.len()];
@@ -244,11 +255,30 @@ impl Recorder {
             let schema_id = mcap.add_schema(ch.schema_name, SCHEMA_ENCODING, ch.schema_text.as_bytes()).map_err(mcap_err)?;
             *id = mcap.add_channel(schema_id, ch.topic, MESSAGE_ENCODING, &BTreeMap::new()).map_err(mcap_err)?;
         }
+        let fox = FoxgloveChannels::register(&mut mcap, cfg.scene.as_ref()).map_err(mcap_err)?;
+        // The run's wall-clock start, taken once: log time = start + simulated time.
+        let start_ns = wall_clock_ns();
         let mut meta: BTreeMap<String, String> = cfg.metadata.iter().cloned().collect();
+        meta.insert("start_wall_ns".into(), start_ns.to_string());
         meta.insert("recording_format".into(), RECORDING_FORMAT_VERSION.to_string());
         meta.insert("contract_version".into(), messages::CONTRACT_VERSION.to_string());
         meta.insert("created_wall_ns".into(), wall_clock_ns().to_string());
         mcap.write_metadata(&Metadata { name: "rig".into(), metadata: meta }).map_err(mcap_err)?;
+        if let (Some(scene), Some(id)) = (cfg.scene.as_ref(), fox.robot_description) {
+            let text = robot::urdf::urdf(&scene.tool);
+            let mut buf = Vec::new();
+            crate::cdr::CdrWriter::new(&mut buf).string(&text);
+            let header = MessageHeader { channel_id: id, sequence: 0, log_time: start_ns, publish_time: start_ns };
+            mcap.write_to_known_channel(&header, &buf).map_err(mcap_err)?;
+            let attachment = mcap::Attachment {
+                log_time: start_ns,
+                create_time: start_ns,
+                name: "irb2400_wheel.urdf".into(),
+                media_type: "application/xml".into(),
+                data: std::borrow::Cow::Owned(text.into_bytes()),
+            };
+            mcap.attach(&attachment).map_err(mcap_err)?;
+        }
         mcap.flush().map_err(mcap_err)?;
 
         let (mut producer, mut consumer) = rtrb::RingBuffer::new(cfg.queue_capacity);
@@ -258,6 +288,7 @@ impl Recorder {
             tick: MaybeUninit::new(TickHead::of(&TickRecord::default())),
             event: MaybeUninit::new(EventRecord::new(0, 0.0, EventKind::Info, "")),
             pressure_pa: [MaybeUninit::new(0.0); MAX_CENTRELINE],
+            top_uy_m: [MaybeUninit::new(0.0); MAX_CENTRELINE],
         };
         for _ in 0..cfg.queue_capacity {
             let _ = producer.push(blank);
@@ -271,6 +302,12 @@ impl Recorder {
             buf: Vec::with_capacity(4096),
             centreline_z,
             pressure: Vec::with_capacity(MAX_CENTRELINE),
+            top_uy: Vec::with_capacity(MAX_CENTRELINE),
+            fox,
+            scene_every: cfg.scene.as_ref().map_or(1, |s| s.every_ticks(cfg.period_s)),
+            robot: cfg.scene.as_ref().map(|s| robot::Robot::irb2400_with_tool(s.tool)),
+            scene: cfg.scene.clone(),
+            start_ns,
             consumer,
             shared: shared.clone(),
             tuning,
@@ -326,6 +363,10 @@ impl Recorder {
             std::ptr::addr_of_mut!((*slot).tick).write(MaybeUninit::new(head));
             let dst = std::ptr::addr_of_mut!((*slot).pressure_pa) as *mut f32;
             for (i, &v) in r.strip.centreline_pressure_pa[..n].iter().enumerate() {
+                dst.add(i).write(v as f32);
+            }
+            let dst = std::ptr::addr_of_mut!((*slot).top_uy_m) as *mut f32;
+            for (i, &v) in r.strip.top_centreline_uy_m[..n].iter().enumerate() {
                 dst.add(i).write(v as f32);
             }
             chunk.commit(1);
@@ -409,6 +450,16 @@ struct WriterThread {
     centreline_z: Vec<f32>,
     /// Centre-line pressures of the tick being written.
     pressure: Vec<f32>,
+    /// Top centre-line displacements of the tick being written.
+    top_uy: Vec<f32>,
+    /// Ids of the Foxglove channels.
+    fox: FoxgloveChannels,
+    /// Transforms and scene every this many ticks.
+    scene_every: u64,
+    robot: Option<robot::Robot>,
+    scene: Option<crate::scene::SceneConfig>,
+    /// The run's wall-clock start (Unix ns): log time = start + simulated time.
+    start_ns: u64,
     consumer: rtrb::Consumer<Slot>,
     shared: Arc<Shared>,
     tuning: RecorderTuning,
@@ -483,7 +534,7 @@ impl WriterThread {
 
     /// Takes the next slot: the tick head is copied out, its pressures go to `self.pressure`.
     fn pop(&mut self) -> Option<Popped> {
-        let Self { consumer, pressure, .. } = self;
+        let Self { consumer, pressure, top_uy, .. } = self;
         let chunk = consumer.read_chunk(1).ok()?;
         let slot = &chunk.as_slices().0[0];
         let item = match slot.kind {
@@ -493,6 +544,8 @@ impl WriterThread {
                 let n = head.strip.n_centreline as usize;
                 pressure.clear();
                 pressure.extend(slot.pressure_pa[..n].iter().map(|p| unsafe { p.assume_init() }));
+                top_uy.clear();
+                top_uy.extend(slot.top_uy_m[..n].iter().map(|p| unsafe { p.assume_init() }));
                 Popped::Tick(head)
             }
             // SAFETY: record_event wrote the event.
@@ -517,8 +570,9 @@ impl WriterThread {
     }
 
     fn write_tick(&mut self, r: &TickHead) -> Result<(), mcap::McapError> {
-        let log_time = sim_time_ns(r.state.sim_time_s);
-        let publish_time = if r.timing.publish_wall_ns != 0 { r.timing.publish_wall_ns } else { wall_clock_ns() };
+        let log_time = self.start_ns + sim_time_ns(r.state.sim_time_s);
+        // The tick's timeline stamp; the real publish wall clock is in /timing.
+        let publish_time = log_time;
         let dropped = self.shared.dropped_ticks.load(Ordering::Relaxed) + self.shared.dropped_events.load(Ordering::Relaxed);
         let Self { mcap, channel_ids, buf, centreline_z, pressure, bytes_since_flush, .. } = self;
         let mcap = mcap.as_mut().expect("checked by handle");
@@ -541,6 +595,7 @@ impl WriterThread {
         }
         schema::encode_timing(buf, r, dropped);
         put(5, buf)?;
+        self.write_scene(r, log_time)?;
         self.ticks_written += 1;
         self.last_tick = r.state.tick;
         self.last_sim_time_s = r.state.sim_time_s;
@@ -553,11 +608,40 @@ impl WriterThread {
         let header = MessageHeader {
             channel_id: self.channel_ids[6],
             sequence: e.tick as u32,
-            log_time: sim_time_ns(e.sim_time_s),
-            publish_time: e.wall_ns,
+            log_time: self.start_ns + sim_time_ns(e.sim_time_s),
+            publish_time: self.start_ns + sim_time_ns(e.sim_time_s),
         };
         self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
+        if let Some(id) = self.fox.log {
+            crate::scene::encode_into(&crate::scene::log_message(e, header.log_time), &mut self.buf);
+            self.bytes_since_flush += self.buf.len() as u64 + 31;
+            let header = MessageHeader { channel_id: id, ..header };
+            self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
+        }
         self.events_written += 1;
+        Ok(())
+    }
+
+    /// Every `scene_every`-th tick: the transforms and the strip scene (decided here, from the
+    /// tick records, so the loop does nothing for them).
+    fn write_scene(&mut self, r: &TickHead, log_time: u64) -> Result<(), mcap::McapError> {
+        let (Some(cfg), Some(robot)) = (self.scene.as_ref(), self.robot.as_ref()) else { return Ok(()) };
+        if r.state.tick % self.scene_every != 0 {
+            return Ok(());
+        }
+        let header = |channel_id| MessageHeader { channel_id, sequence: r.state.tick as u32, log_time, publish_time: log_time };
+        let mcap = self.mcap.as_mut().expect("checked by handle");
+        if let Some(id) = self.fox.transforms {
+            crate::scene::encode_into(&crate::scene::frame_transforms(robot, cfg, &r.state.q, log_time), &mut self.buf);
+            self.bytes_since_flush += self.buf.len() as u64 + 31;
+            mcap.write_to_known_channel(&header(id), &self.buf)?;
+        }
+        if let Some(id) = self.fox.scene {
+            let msg = crate::scene::scene_update(cfg, r, &self.centreline_z, &self.pressure, &self.top_uy, log_time);
+            crate::scene::encode_into(&msg, &mut self.buf);
+            self.bytes_since_flush += self.buf.len() as u64 + 31;
+            mcap.write_to_known_channel(&header(id), &self.buf)?;
+        }
         Ok(())
     }
 
@@ -714,8 +798,9 @@ impl WriterThread {
         let mut body = Vec::new();
         body.extend_from_slice(&self.channel_ids[6].to_le_bytes());
         body.extend_from_slice(&(e.tick as u32).to_le_bytes());
-        body.extend_from_slice(&sim_time_ns(e.sim_time_s).to_le_bytes());
-        body.extend_from_slice(&e.wall_ns.to_le_bytes());
+        let ns = self.start_ns + sim_time_ns(e.sim_time_s);
+        body.extend_from_slice(&ns.to_le_bytes());
+        body.extend_from_slice(&ns.to_le_bytes());
         body.extend_from_slice(&self.buf);
         record(&mut out, op::MESSAGE, &body);
         let mut entries = Vec::new();
@@ -823,4 +908,33 @@ pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
         cur = c.source();
     }
     s
+}
+
+/// Channel ids of what Foxglove draws (None: not written in this recording).
+#[derive(Debug, Default, Clone, Copy)]
+struct FoxgloveChannels {
+    robot_description: Option<u16>,
+    transforms: Option<u16>,
+    scene: Option<u16>,
+    log: Option<u16>,
+}
+
+impl FoxgloveChannels {
+    /// Registers `/log` always, and with a scene `/robot_description`, `/tf` and `/strip_scene`.
+    fn register(mcap: &mut McapFile, scene: Option<&crate::scene::SceneConfig>) -> Result<Self, mcap::McapError> {
+        use crate::scene::*;
+        let mut add = |topic: &str, (name, encoding, data): (String, String, Vec<u8>), message_encoding: &str| -> Result<u16, mcap::McapError> {
+            let schema_id = mcap.add_schema(&name, &encoding, &data)?;
+            mcap.add_channel(schema_id, topic, message_encoding, &BTreeMap::new())
+        };
+        let mut ch = FoxgloveChannels::default();
+        if scene.is_some() {
+            let string = ("std_msgs/msg/String".to_string(), SCHEMA_ENCODING.to_string(), ROBOT_DESCRIPTION_SCHEMA.as_bytes().to_vec());
+            ch.robot_description = Some(add(ROBOT_DESCRIPTION_TOPIC, string, MESSAGE_ENCODING)?);
+            ch.transforms = Some(add(TRANSFORMS_TOPIC, schema_of::<foxglove::messages::FrameTransforms>(), "protobuf")?);
+            ch.scene = Some(add(SCENE_TOPIC, schema_of::<foxglove::messages::SceneUpdate>(), "protobuf")?);
+        }
+        ch.log = Some(add(LOG_TOPIC, schema_of::<foxglove::messages::Log>(), "protobuf")?);
+        Ok(ch)
+    }
 }
