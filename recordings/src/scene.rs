@@ -34,6 +34,21 @@ pub const ROBOT_DESCRIPTION_TOPIC: &str = "/robot_description";
 pub const TRANSFORMS_TOPIC: &str = "/tf";
 pub const SCENE_TOPIC: &str = "/strip_scene";
 pub const LOG_TOPIC: &str = "/log";
+pub const UNDER_WHEEL_TOPIC: &str = "/pressure_under_wheel";
+
+/// `/pressure_under_wheel` (JSON, at the scene rate): the centre-line bottom pressure under the
+/// wheel (linear interpolation at `wheel_z`, as `rig report` computes it) beside the constant
+/// bond line, so a Plot panel draws both.
+pub const UNDER_WHEEL_SCHEMA: &str = r#"{"title":"rig.PressureUnderWheel","type":"object","properties":{"tick":{"type":"integer"},"wheel_z_m":{"type":"number","description":"m, wheel position along the strip"},"pressure_pa":{"type":"number","description":"Pa, centre-line bottom pressure under the wheel"},"bond_line_pa":{"type":"number","description":"Pa, the bond criterion (100 kPa)"}}}"#;
+
+/// The `/pressure_under_wheel` message of one tick.
+pub fn under_wheel_json(r: &TickHead, centreline_z_m: &[f32], pressure_pa: &[f32]) -> String {
+    let p = interp(centreline_z_m, pressure_pa, r.strip.wheel_z_m);
+    format!(
+        r#"{{"tick":{},"wheel_z_m":{},"pressure_pa":{},"bond_line_pa":{}}}"#,
+        r.state.tick, r.strip.wheel_z_m, p, BOND_PRESSURE_PA
+    )
+}
 
 /// `/robot_description`: the URDF once, as ROS 2 `std_msgs/msg/String` (what Foxglove's URDF
 /// layer reads from a topic).

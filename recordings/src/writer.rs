@@ -642,6 +642,11 @@ impl WriterThread {
             self.bytes_since_flush += self.buf.len() as u64 + 31;
             mcap.write_to_known_channel(&header(id), &self.buf)?;
         }
+        if let (Some(id), true) = (self.fox.under_wheel, !self.pressure.is_empty()) {
+            let json = crate::scene::under_wheel_json(r, &self.centreline_z, &self.pressure);
+            self.bytes_since_flush += json.len() as u64 + 31;
+            mcap.write_to_known_channel(&header(id), json.as_bytes())?;
+        }
         Ok(())
     }
 
@@ -916,11 +921,13 @@ struct FoxgloveChannels {
     robot_description: Option<u16>,
     transforms: Option<u16>,
     scene: Option<u16>,
+    under_wheel: Option<u16>,
     log: Option<u16>,
 }
 
 impl FoxgloveChannels {
-    /// Registers `/log` always, and with a scene `/robot_description`, `/tf` and `/strip_scene`.
+    /// Registers `/log` always, and with a scene `/robot_description`, `/tf`, `/strip_scene` and
+    /// `/pressure_under_wheel`.
     fn register(mcap: &mut McapFile, scene: Option<&crate::scene::SceneConfig>) -> Result<Self, mcap::McapError> {
         use crate::scene::*;
         let mut add = |topic: &str, (name, encoding, data): (String, String, Vec<u8>), message_encoding: &str| -> Result<u16, mcap::McapError> {
@@ -933,6 +940,8 @@ impl FoxgloveChannels {
             ch.robot_description = Some(add(ROBOT_DESCRIPTION_TOPIC, string, MESSAGE_ENCODING)?);
             ch.transforms = Some(add(TRANSFORMS_TOPIC, schema_of::<foxglove::messages::FrameTransforms>(), "protobuf")?);
             ch.scene = Some(add(SCENE_TOPIC, schema_of::<foxglove::messages::SceneUpdate>(), "protobuf")?);
+            let json = ("rig.PressureUnderWheel".to_string(), "jsonschema".to_string(), UNDER_WHEEL_SCHEMA.as_bytes().to_vec());
+            ch.under_wheel = Some(add(UNDER_WHEEL_TOPIC, json, "json")?);
         }
         ch.log = Some(add(LOG_TOPIC, schema_of::<foxglove::messages::Log>(), "protobuf")?);
         Ok(ch)

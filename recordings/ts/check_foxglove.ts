@@ -112,6 +112,10 @@ function decoderFor(channelId: number): (data: Uint8Array) => any {
       return a;
     };
   }
+  if (ch.messageEncoding === "json" && schema.encoding === "jsonschema") {
+    JSON.parse(new TextDecoder().decode(schema.data));
+    return (d) => JSON.parse(new TextDecoder().decode(d));
+  }
   throw new Error(`${ch.topic}: no decoder for ${ch.messageEncoding} / ${schema.encoding}`);
 }
 
@@ -301,6 +305,18 @@ check(worstColour <= 0.5 / 256 + 1e-12, `vertex colours follow the recorded pres
 check(bonded > 0, `some vertices show the bond (>= 100 kPa) colour (${bonded})`);
 console.log(`scene: ${scenes.length} updates, colour error worst ${worstColour.toExponential(2)}, ${bonded} bonded vertex samples`);
 
+// ---- the pressure under the wheel beside the bond line (for the layout's plot) ----
+const under = messages.filter((m) => m.topic === "/pressure_under_wheel");
+check(under.length === scenes.length, "one /pressure_under_wheel per scene");
+let worstUnder = 0;
+for (const m of under) {
+  const s = strips.get(Number(m.msg.tick));
+  const want = interp(Array.from(s.centreline_z as Float32Array), Array.from(s.centreline_pressure as Float32Array), s.wheel_z);
+  worstUnder = Math.max(worstUnder, Math.abs(m.msg.pressure_pa - want));
+  check(m.msg.bond_line_pa === 100e3, "bond line 100 kPa");
+}
+check(worstUnder < 1e-6, `/pressure_under_wheel is the recorded pressure at the wheel (worst ${worstUnder} Pa)`);
+
 // ---- events as foxglove.Log ----
 const events = messages.filter((m) => m.topic === "/events");
 const logs = messages.filter((m) => m.topic === "/log");
@@ -310,6 +326,21 @@ events.forEach((e, i) => {
   const l = logs[i]?.msg;
   check(l !== undefined && l.name === e.msg.kind_name && l.level === (levelOf[e.msg.kind_name] ?? 2) && l.message.includes(e.msg.text), `/log ${i} is /events ${e.msg.kind_name}`);
 });
+
+// ---- the shipped layout refers to topics and fields the recording has ----
+const layout = JSON.parse(readFileSync(new URL("../foxglove/layout.json", import.meta.url), "utf8"));
+for (const [id, cfg] of Object.entries(layout.configById) as [string, any][]) {
+  for (const p of cfg.paths ?? []) {
+    const m = /^(\/[a-z_]+)\.([a-z_]+)(?:\[(\d+)\])?$/.exec(p.value);
+    const msg = m && messages.find((x) => x.topic === m[1])?.msg;
+    const v = msg && (m[3] === undefined ? msg[m[2]] : msg[m[2]]?.[Number(m[3])]);
+    check(v !== undefined && v !== null, `layout ${id}: ${p.value} is in the recording`);
+  }
+  if (cfg.topicToRender) check(count(cfg.topicToRender) > 0, `layout ${id}: ${cfg.topicToRender} is in the recording`);
+  for (const layer of Object.values(cfg.layers ?? {}) as any[]) {
+    if (layer.topic) check(count(layer.topic) > 0, `layout ${id}: ${layer.topic} is in the recording`);
+  }
+}
 
 console.log(`${passed} passed, ${failed} failed`);
 process.exit(failed === 0 ? 0 : 1);
