@@ -642,6 +642,18 @@ mod tests {
         let surface = STRIP_TOP_HEIGHT_M + r.top_displacement_m;
         assert!((k * (surface - y_low) - p).abs() < 1e-6 * p, "{surface}");
         assert!(r.n_centreline as usize == model.centre_bottom.len() && r.max_bottom_pressure_pa > 0.0);
+        // The top centre line (the crest, x = 0) displaced as the static response to the wheel's
+        // force says, the bulge's static displacement added.
+        let mut crest: Vec<usize> = (0..model.n_top()).filter(|&j| model.top_xyz_m[j][0].abs() < 1e-9).collect();
+        crest.sort_by(|&a, &b| model.top_xyz_m[a][2].total_cmp(&model.top_xyz_m[b][2]));
+        assert_eq!(crest.len(), r.n_centreline as usize);
+        let f = c.contact_force_n();
+        let scale = crest.iter().map(|&j| (y[j] * f).abs()).fold(0.0, f64::max);
+        assert!(scale > 1e-6, "the wheel presses the crest: {scale} m");
+        for (k, &j) in crest.iter().enumerate() {
+            let want = y[j] * f + model.bulge_top_uy_m[j];
+            assert!((r.top_centreline_uy_m[k] - want).abs() < 1e-4 * scale, "crest node {k}: {} vs {want}", r.top_centreline_uy_m[k]);
+        }
         // The wrench on the tool: +p along base z, no moment about the wheel centre.
         let wr = c.wrench();
         assert!((wr.force_base_n.z - p).abs() < 1e-12 && wr.torque_base_nm.norm() < 1e-12 * p);
