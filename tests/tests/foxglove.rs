@@ -80,9 +80,66 @@ fn foxglove_libraries_read_the_robot_the_strip_and_the_timeline_of_a_real_run() 
     let expect_path = dir.join("expect.json");
     std::fs::write(&expect_path, serde_json::to_string(&expect).unwrap()).unwrap();
 
+    // Lockstep determinism: a second run gives the same payload bytes on every channel, the
+    // Foxglove ones once their timestamps (the run's start + simulated time) are taken out.
+    let rig2 = unique_rig("fox2");
+    let dir2 = temp_dir(&rig2);
+    let mut plant = start_plant(&rig2, &scenario_path, &dir2, 3.6, &["--mode", "lockstep"]);
+    let mut ctrl = start_controller("controller", "controller", &rig2, &scenario_path, &dir2, &[]);
+    assert!(plant.expect_exit(Duration::from_secs(300)).success(), "plant failed: {}", plant.stderr());
+    assert!(ctrl.expect_exit(Duration::from_secs(10)).success(), "controller failed: {}", ctrl.stderr());
+    let (a, b) = (payloads(&path), payloads(&dir2.join("run.mcap")));
+    assert_eq!(a.len(), b.len());
+    assert!(a.iter().any(|(t, _)| t == "/strip_scene") && a.iter().any(|(t, _)| t == "/tf"));
+    for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(x == y, "message {k} on {} differs between two lockstep runs", x.0);
+    }
+
     let out = Command::new(&tsx).current_dir(&ts_dir).arg("check_foxglove.ts").arg(&path).arg(&expect_path).output().unwrap();
     let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     println!("{stdout}{stderr}");
     assert!(out.status.success(), "the Foxglove check failed:\n{stdout}\n{stderr}");
     assert!(stdout.contains(" passed, 0 failed"), "{stdout}");
+}
+
+/// (topic, payload) of every message, in file order; the Foxglove messages with their
+/// timestamps zeroed, `/joint_torque` without the controller's process id, `/controller` without
+/// its compute time; left out: `/timing`
+/// (wall clocks), `/events` and `/log` (their texts name the controller's process id).
+fn payloads(path: &std::path::Path) -> Vec<(String, Vec<u8>)> {
+    use foxglove::messages::{FrameTransforms, SceneUpdate};
+    use foxglove::{Decode, Encode};
+    let bytes = std::fs::read(path).unwrap();
+    let mut out = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let topic = m.channel.topic.clone();
+        let mut data = Vec::new();
+        match topic.as_str() {
+            "/timing" | "/robot_description" | "/events" | "/log" => continue,
+            "/joint_torque" => {
+                let mut row = recordings::schema::decode_joint_torque(&m.data).unwrap();
+                row.torque.controller_id = 0;
+                data = format!("{row:?}").into_bytes();
+            }
+            "/controller" => {
+                let mut d = recordings::schema::decode_controller(&m.data).unwrap();
+                d.compute_time_ns = 0;
+                data = format!("{d:?}").into_bytes();
+            }
+            "/tf" => {
+                let mut msg = FrameTransforms::decode(&m.data[..]).unwrap();
+                msg.transforms.iter_mut().for_each(|t| t.timestamp = None);
+                msg.encode(&mut data).unwrap();
+            }
+            "/strip_scene" => {
+                let mut msg = SceneUpdate::decode(&m.data[..]).unwrap();
+                msg.entities.iter_mut().for_each(|e| e.timestamp = None);
+                msg.encode(&mut data).unwrap();
+            }
+            _ => data = m.data.into_owned(),
+        }
+        out.push((topic, data));
+    }
+    out
 }
