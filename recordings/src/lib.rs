@@ -3,7 +3,9 @@
 //! The plant hands one fixed-size [`TickRecord`] per tick (and an [`EventRecord`] per event) to a
 //! [`Recorder`]: a wait-free push into a bounded single-producer queue; a writer thread encodes the
 //! records as ROS 2 messages (CDR, `ros2msg` schemas embedded) into zstd-compressed MCAP chunks.
-//! Channels and their fields are listed in `recordings/README.md` and in [`schema`].
+//! Channels and their fields are listed in `recordings/README.md` and in [`schema`]; what Foxglove
+//! draws (URDF, transforms, strip scene, log) in [`scene`]. Log time = the run's wall-clock start +
+//! simulated time; publish time = log time.
 //!
 //! - [`read::Recording`] reads a file back, checking every chunk's CRC (a cut or corrupt file up to
 //!   its first bad chunk, saying where and why).
@@ -185,7 +187,8 @@ pub struct EventRecord {
     pub kind: EventKind,
     pub text: [u8; EVENT_TEXT_MAX],
     pub text_len: u16,
-    /// Wall clock (CLOCK_REALTIME ns) when the event was created; the MCAP publish time.
+    /// Wall clock (CLOCK_REALTIME ns) when the event was created (the MCAP stamps are the run's
+    /// start + `sim_time_s`, like every message's).
     pub wall_ns: u64,
 }
 
@@ -266,7 +269,8 @@ impl Default for TickRecord {
     }
 }
 
-/// Simulated time of a tick in ns: the MCAP log time of every message of that tick.
+/// Simulated time of a tick in ns: added to the run's wall-clock start, the MCAP log (and publish)
+/// time of every message of that tick.
 pub fn sim_time_ns(sim_time_s: f64) -> u64 {
     if sim_time_s <= 0.0 || !sim_time_s.is_finite() {
         0

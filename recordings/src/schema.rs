@@ -2,7 +2,8 @@
 //! `ros2msg`), and the CDR encoder/decoder of each, kept side by side so field order cannot drift.
 //!
 //! Every field is SI (m, s, N, N m, Pa, rad); `tick` is the plant's tick number. Log time of
-//! every message is the simulated time of its tick in ns; publish time is the wall clock.
+//! every message is the run's wall-clock start + the simulated time of its tick in ns; publish
+//! time is the same.
 
 use crate::cdr::{CdrError, CdrReader, CdrWriter};
 use crate::{EventKind, EventRecord, TickRecord, TimingRecord, MAX_CENTRELINE};
