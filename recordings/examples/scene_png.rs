@@ -76,17 +76,17 @@ fn draw(area: &DrawingArea<BitMapBackend, plotters::coord::Shift>, view: &View, 
 }
 
 fn colour(c: &Option<foxglove::messages::Color>) -> RGBColor {
-    let c = c.clone().unwrap_or_default();
+    let c = c.unwrap_or_default();
     RGBColor((c.r * 255.0).round() as u8, (c.g * 255.0).round() as u8, (c.b * 255.0).round() as u8)
 }
 
 fn iso_of(t: &Option<foxglove::messages::Vector3>, r: &Option<foxglove::messages::Quaternion>) -> Isometry3<f64> {
-    let (t, r) = (t.clone().unwrap_or_default(), r.clone().unwrap_or_default());
+    let (t, r) = (t.unwrap_or_default(), r.unwrap_or_default());
     Isometry3::from_parts(Translation3::new(t.x, t.y, t.z), UnitQuaternion::from_quaternion(Quaternion::new(r.w, r.x, r.y, r.z)))
 }
 
 fn pose_of(p: &Option<foxglove::messages::Pose>) -> Isometry3<f64> {
-    let p = p.clone().unwrap_or_default();
+    let p = p.unwrap_or_default();
     iso_of(&p.position, &p.orientation)
 }
 
@@ -156,7 +156,7 @@ fn main() -> anyhow::Result<()> {
                     (pose * Point3::new(v.x, v.y, v.z)).coords
                 });
                 // the triangle's colour: its vertices' mean
-                let cs: Vec<RGBColor> = k.iter().map(|&i| colour(&Some(t.colors[i as usize].clone()))).collect();
+                let cs: Vec<RGBColor> = k.iter().map(|&i| colour(&Some(t.colors[i as usize]))).collect();
                 let mean = |f: fn(&RGBColor) -> u8| (cs.iter().map(|c| f(c) as u32).sum::<u32>() / 3) as u8;
                 strip_task.push(Shape::Tri(p, RGBColor(mean(|c| c.0), mean(|c| c.1), mean(|c| c.2))));
             }
@@ -165,7 +165,7 @@ fn main() -> anyhow::Result<()> {
             arrow = Some((pose_of(&a.pose), a.shaft_length + a.head_length));
         }
         for c in &e.cubes {
-            scale_cells.push((pose_of(&c.pose).translation.vector, colour(&c.color), c.size.clone().unwrap_or_default()));
+            scale_cells.push((pose_of(&c.pose).translation.vector, colour(&c.color), c.size.unwrap_or_default()));
         }
         for l in &e.lines {
             if e.id == "bulge" {

@@ -90,7 +90,8 @@ impl SceneConfig {
 
     /// Ticks between two scene samples at control period `period_s` (at least 1).
     pub fn every_ticks(&self, period_s: f64) -> u64 {
-        if !(self.rate_hz > 0.0) || !(period_s > 0.0) {
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        if !positive(self.rate_hz) || !positive(period_s) {
             return 1;
         }
         ((1.0 / (self.rate_hz * period_s)).round() as u64).max(1)

@@ -626,7 +626,7 @@ impl WriterThread {
     /// tick records, so the loop does nothing for them).
     fn write_scene(&mut self, r: &TickHead, log_time: u64) -> Result<(), mcap::McapError> {
         let (Some(cfg), Some(robot)) = (self.scene.as_ref(), self.robot.as_ref()) else { return Ok(()) };
-        if r.state.tick % self.scene_every != 0 {
+        if !r.state.tick.is_multiple_of(self.scene_every) {
             return Ok(());
         }
         let header = |channel_id| MessageHeader { channel_id, sequence: r.state.tick as u32, log_time, publish_time: log_time };
