@@ -150,6 +150,12 @@ fn quantise(v: f64, step: f64) -> f64 {
 
 /// Linear interpolation of `v` over ascending `z` at `x`, held beyond the ends.
 fn interp(z: &[f32], v: &[f32], x: f64) -> f64 {
+    interp_from(z, v, x, &mut 1)
+}
+
+/// [`interp`] starting its search at `*from` (and leaving it where it found `x`): a run of
+/// ascending `x` costs one pass over `z` in all.
+fn interp_from(z: &[f32], v: &[f32], x: f64, from: &mut usize) -> f64 {
     let n = z.len().min(v.len());
     if n == 0 {
         return 0.0;
@@ -157,8 +163,12 @@ fn interp(z: &[f32], v: &[f32], x: f64) -> f64 {
     if x <= z[0] as f64 {
         return v[0] as f64;
     }
-    for i in 1..n {
+    if *from < 1 || *from > n || x <= z[*from - 1] as f64 {
+        *from = 1;
+    }
+    for i in *from..n {
         if x <= z[i] as f64 {
+            *from = i;
             let (z0, z1) = (z[i - 1] as f64, z[i] as f64);
             let s = if z1 > z0 { (x - z0) / (z1 - z0) } else { 0.0 };
             return (1.0 - s) * v[i - 1] as f64 + s * v[i] as f64;
@@ -224,12 +234,14 @@ pub fn scene_update(cfg: &SceneConfig, r: &TickHead, centreline_z_m: &[f32], pre
         let n = g.top_xyz_m.len();
         let mut points = Vec::with_capacity(n);
         let mut colors = Vec::with_capacity(n);
+        // The nodes come layer by layer in ascending z: one cursor per quantity.
+        let (mut at_u, mut at_p) = (1, 1);
         for p in &g.top_xyz_m {
-            let uy = interp(centreline_z_m, top_uy_m, p[2]);
+            let uy = interp_from(centreline_z_m, top_uy_m, p[2], &mut at_u);
             let z = quantise(p[2], POSITION_STEP_M);
             points.push(Point3 { x: quantise(p[0], POSITION_STEP_M), y: quantise(p[1] + uy, POSITION_STEP_M), z });
             // the colour of the vertex as drawn (at its rounded z)
-            let c = pressure_colour(interp(centreline_z_m, pressure_pa, z));
+            let c = pressure_colour(interp_from(centreline_z_m, pressure_pa, z, &mut at_p));
             colors.push(rgba(c.map(|v| quantise(v, COLOUR_STEP))));
         }
         let per = g.nodes_per_layer.max(1);
@@ -351,4 +363,42 @@ pub fn schema_of<T: Encode>() -> (String, String, Vec<u8>) {
 pub fn encode_into<T: Encode>(msg: &T, buf: &mut Vec<u8>) {
     buf.clear();
     msg.encode(buf).expect("a Vec grows");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The cursor search gives what the plain one does, for ascending, repeated and falling x.
+    #[test]
+    fn interpolation_with_a_cursor_is_the_plain_interpolation() {
+        let z = [0.0f32, 0.001, 0.002, 0.004, 0.008];
+        let v = [1.0f32, -2.0, 3.0, 5.0, 0.5];
+        let mut at = 1;
+        for x in [-0.001, 0.0, 0.0005, 0.0005, 0.0015, 0.003, 0.0079, 0.009, 0.0012, 0.0, 0.006] {
+            let plain = {
+                let i = z.iter().position(|&zi| x <= zi as f64);
+                match i {
+                    Some(0) => v[0] as f64,
+                    Some(i) => {
+                        let s = (x - z[i - 1] as f64) / (z[i] as f64 - z[i - 1] as f64);
+                        (1.0 - s) * v[i - 1] as f64 + s * v[i] as f64
+                    }
+                    None => v[4] as f64,
+                }
+            };
+            assert_eq!(interp_from(&z, &v, x, &mut at), plain, "x = {x}");
+        }
+    }
+
+    /// The colour map at its documented points.
+    #[test]
+    fn pressure_colours_at_the_documented_points() {
+        assert_eq!(pressure_colour(-5e3), [0.1, 0.2, 0.6, 1.0]);
+        assert_eq!(pressure_colour(0.0), [0.1, 0.2, 0.6, 1.0]);
+        assert_eq!(pressure_colour(100e3), [1.0, 0.9, 0.1, 1.0]);
+        assert_eq!(pressure_colour(300e3), [1.0, 0.0, 0.0, 1.0]);
+        let below = pressure_colour(99.999e3);
+        assert!((below[0] - 0.6).abs() < 1e-4 && (below[1] - 0.8).abs() < 1e-4 && (below[2] - 1.0).abs() < 1e-4);
+    }
 }
