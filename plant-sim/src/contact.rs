@@ -106,6 +106,8 @@ struct WheelTable {
     bulge_w: Vec<f64>,
     /// D_centreline w, [g * n_cl + c].
     d_cl: Vec<f64>,
+    /// D_top-centreline w, [g * n_cl + c] (the top nodes of the centre line, for the scene).
+    d_tcl: Vec<f64>,
 }
 
 /// Real dot product with 8 independent partial sums combined in a fixed order: vectorized (AVX2
@@ -187,7 +189,7 @@ fn dot_portable(a: &[f64], b: &[f64]) -> f64 {
 
 impl WheelTable {
     /// Table for `model` with the substep's ZOH factors γ = (e^{λh} − 1)/λ per mode.
-    fn build(model: &StripModel, cl_rows: &[usize], g_re: &[f64], g_im: &[f64]) -> WheelTable {
+    fn build(model: &StripModel, cl_rows: &[usize], tcl_rows: &[usize], g_re: &[f64], g_im: &[f64]) -> WheelTable {
         let mf = &model.modal;
         let modes = mf.modes();
         let n_top = model.n_top();
@@ -207,6 +209,7 @@ impl WheelTable {
             d_sum: vec![0.0; n],
             bulge_w: vec![0.0; n],
             d_cl: vec![0.0; n * n_cl],
+            d_tcl: vec![0.0; n * tcl_rows.len()],
         };
         // Column sums of D over the bottom rows (total bottom reaction per unit top force).
         let d_colsum: Vec<f64> = (0..n_top).map(|j| (0..n_bottom).map(|r| model.d[(n_top + r, j)]).sum()).collect();
@@ -245,6 +248,9 @@ impl WheelTable {
             t.bulge_w[g] = nz.iter().map(|&i| w[i] * model.bulge_top_uy_m[i]).sum();
             for (c, &row) in cl_rows.iter().enumerate() {
                 t.d_cl[g * n_cl + c] = nz.iter().map(|&j| model.d[(row, j)] * w[j]).sum();
+            }
+            for (c, &row) in tcl_rows.iter().enumerate() {
+                t.d_tcl[g * tcl_rows.len() + c] = nz.iter().map(|&j| model.d[(row, j)] * w[j]).sum();
             }
         }
         for g in 0..n {
@@ -314,6 +320,12 @@ pub struct StripContact {
     bulge_sum_n: f64,
     /// Output rows of C (weighted) for the centre line, real rows `[Re, −Im]`, [c * 2 modes ..].
     ccl: Vec<f64>,
+    /// The same for the top nodes on the centre line (x = 0, by z; one per bottom centre-line
+    /// node when the mesh has them), with their static bulge displacement; empty otherwise.
+    ctcl: Vec<f64>,
+    tcl_bulge_m: Vec<f64>,
+    /// Rest coordinates of every top-surface node (task frame, m), layer by layer, then by x.
+    top_xyz_m: Vec<[f64; 3]>,
     // Last substep's results.
     z_a_m: f64,
     delta_prev_m: f64,
@@ -363,7 +375,21 @@ impl StripContact {
                 ccl[c * 2 * modes + modes + k] = -mf.c[row * modes + k].im;
             }
         }
-        let table = WheelTable::build(model, &cl_rows, &g_re, &g_im);
+        // Top centre-line nodes (the crest, x = 0) at the bottom centre line's z.
+        let mut tcl: Vec<usize> = (0..n_top).filter(|&j| model.top_xyz_m[j][0].abs() < 1e-9).collect();
+        tcl.sort_by(|&a, &b| model.top_xyz_m[a][2].total_cmp(&model.top_xyz_m[b][2]));
+        let same_z = tcl.len() == cl.len() && tcl.iter().zip(&cl).all(|(&j, &(_, z, _))| (model.top_xyz_m[j][2] - z).abs() < 1e-9);
+        if !same_z {
+            tcl.clear();
+        }
+        let mut ctcl = vec![0.0; tcl.len() * 2 * modes];
+        for (c, &row) in tcl.iter().enumerate() {
+            for k in 0..modes {
+                ctcl[c * 2 * modes + k] = mf.c[row * modes + k].re;
+                ctcl[c * 2 * modes + modes + k] = -mf.c[row * modes + k].im;
+            }
+        }
+        let table = WheelTable::build(model, &cl_rows, &tcl, &g_re, &g_im);
         StripContact {
             geo,
             table,
@@ -379,6 +405,9 @@ impl StripContact {
             bulge_sum_n: model.bulge_bottom_reaction_n.iter().sum(),
             cl_rows,
             ccl,
+            ctcl,
+            tcl_bulge_m: tcl.iter().map(|&j| model.bulge_top_uy_m[j]).collect(),
+            top_xyz_m: model.top_xyz_m.clone(),
             z_a_m: 0.0,
             delta_prev_m: f64::NEG_INFINITY,
             force_y_n: 0.0,
@@ -394,6 +423,11 @@ impl StripContact {
     /// z of the centre-line bottom nodes (m), in the order of `StripRecord::centreline_pressure_pa`.
     pub fn centreline_z_m(&self) -> &[f64] {
         &self.cl_z_m
+    }
+
+    /// Rest coordinates of the top-surface nodes (task frame, m), for the recording's scene.
+    pub fn top_xyz_m(&self) -> &[[f64; 3]] {
+        &self.top_xyz_m
     }
 
     /// Wheel's lowest point (base) and the direction to it from the wheel centre, for a TCP (the
@@ -513,6 +547,14 @@ impl StripContact {
             r.centreline_pressure_pa[c] = p;
             pmax = pmax.max(p);
         }
+        // Top centre-line displacement (same z), for the decimated 3D scene.
+        let n_tcl = self.tcl_bulge_m.len();
+        let (e0, e1) = (&t.d_tcl[g * n_tcl..(g + 1) * n_tcl], &t.d_tcl[(g + 1) * n_tcl..(g + 2) * n_tcl]);
+        for c in 0..n_tcl {
+            let u = dot(&self.ctcl[c * m2..(c + 1) * m2], x);
+            r.top_centreline_uy_m[c] = u + ((1.0 - s) * e0[c] + s * e1[c]) * f + self.tcl_bulge_m[c];
+        }
+        r.top_centreline_uy_m[n_tcl..n_cl].fill(0.0);
         r.n_centreline = n_cl as u32;
         r.max_bottom_pressure_pa = if n_cl > 0 { pmax } else { 0.0 };
     }
@@ -600,6 +642,18 @@ mod tests {
         let surface = STRIP_TOP_HEIGHT_M + r.top_displacement_m;
         assert!((k * (surface - y_low) - p).abs() < 1e-6 * p, "{surface}");
         assert!(r.n_centreline as usize == model.centre_bottom.len() && r.max_bottom_pressure_pa > 0.0);
+        // The top centre line (the crest, x = 0) displaced as the static response to the wheel's
+        // force says, the bulge's static displacement added.
+        let mut crest: Vec<usize> = (0..model.n_top()).filter(|&j| model.top_xyz_m[j][0].abs() < 1e-9).collect();
+        crest.sort_by(|&a, &b| model.top_xyz_m[a][2].total_cmp(&model.top_xyz_m[b][2]));
+        assert_eq!(crest.len(), r.n_centreline as usize);
+        let f = c.contact_force_n();
+        let scale = crest.iter().map(|&j| (y[j] * f).abs()).fold(0.0, f64::max);
+        assert!(scale > 1e-6, "the wheel presses the crest: {scale} m");
+        for (k, &j) in crest.iter().enumerate() {
+            let want = y[j] * f + model.bulge_top_uy_m[j];
+            assert!((r.top_centreline_uy_m[k] - want).abs() < 1e-4 * scale, "crest node {k}: {} vs {want}", r.top_centreline_uy_m[k]);
+        }
         // The wrench on the tool: +p along base z, no moment about the wheel centre.
         let wr = c.wrench();
         assert!((wr.force_base_n.z - p).abs() < 1e-12 && wr.torque_base_nm.norm() < 1e-12 * p);

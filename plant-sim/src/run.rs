@@ -193,6 +193,8 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
                 chunk_size_bytes: scenario.recording.chunk_size_bytes,
                 metadata,
                 live: opts.live.clone(),
+                scene: Some(scene_config(&scenario, physics.contact())),
+                period_s: l.period_s,
             };
             Some(Recorder::start(cfg).with_context(|| format!("starting the recorder on {}", path.display()))?)
         }
@@ -267,4 +269,32 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     };
     tracing::info!(ticks = stats.ticks, misses = stats.misses, safe_stops = stats.safe_stops, "plant stopped");
     Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live })
+}
+
+/// What the recording's Foxglove channels draw: the scenario's tool and placement, and the strip
+/// model's top surface (`recordings::scene`).
+fn scene_config(s: &scenario::Scenario, contact: Option<&crate::contact::StripContact>) -> recordings::scene::SceneConfig {
+    use recordings::scene::{SceneConfig, StripGeometry};
+    let p = &s.placement;
+    let params = crate::contact::strip_params(s);
+    let strip = contact.map(|c| {
+        let top = c.top_xyz_m();
+        let nodes_per_layer = top.iter().take_while(|n| (n[2] - top[0][2]).abs() < 1e-12).count();
+        StripGeometry {
+            top_xyz_m: top.to_vec(),
+            nodes_per_layer,
+            substrate_zy_m: (0..=200).map(|i| {
+                let z = params.length_m * i as f64 / 200.0;
+                [z, params.bulge_height_m(z)]
+            }).collect(),
+            length_m: params.length_m,
+            half_width_m: strip::mesh::HALF_WIDTH_M,
+        }
+    });
+    SceneConfig {
+        rate_hz: s.recording.scene_rate_hz,
+        tool: crate::physics::tool_from_scenario(s),
+        task_in_base: SceneConfig::task_frame(p.strip_start_x_m, p.strip_y_m, p.table_z_m),
+        strip,
+    }
 }

@@ -142,11 +142,17 @@ def main():
             fail(f"{topic}: tick {gap[0]} is followed by {gap[1]}")
         if t[:1] != ref[:1] or len(t) != len(ref):
             fail(f"{topic}: {len(t)} ticks from {t[:1]}, /joint_state has {len(ref)} from {ref[:1]}")
+    # log time = the run's wall-clock start (metadata rig/start_wall_ns) + simulated time
+    start = int(w.metadata.get("rig", {}).get("start_wall_ns", "0"))
     for msg, (tick, log_time, _) in zip(w.decoded["/joint_state"], w.rows["/joint_state"]):
         if len(msg.q) != 6 or len(msg.qd) != 6:
             fail(f"/joint_state tick {tick}: q/qd do not have 6 joints")
-        if log_time != max(0, round(msg.sim_time * 1e9)):
-            fail(f"/joint_state tick {tick}: log time {log_time} is not the simulated time {msg.sim_time} s")
+        if log_time != start + max(0, round(msg.sim_time * 1e9)):
+            fail(f"/joint_state tick {tick}: log time {log_time} is not the start {start} + the simulated time {msg.sim_time} s")
+    for topic, rows in w.rows.items():
+        late = next((r for r in rows if r[2] > r[1]), None)
+        if late:
+            fail(f"{topic} tick {late[0]}: publish time {late[2]} is later than the log time {late[1]}")
     for msg in w.decoded["/timing"]:
         stamp = msg.publish_stamp.sec * 1_000_000_000 + msg.publish_stamp.nanosec
         if stamp != msg.publish_wall_ns:

@@ -3,7 +3,9 @@
 //! The plant hands one fixed-size [`TickRecord`] per tick (and an [`EventRecord`] per event) to a
 //! [`Recorder`]: a wait-free push into a bounded single-producer queue; a writer thread encodes the
 //! records as ROS 2 messages (CDR, `ros2msg` schemas embedded) into zstd-compressed MCAP chunks.
-//! Channels and their fields are listed in `recordings/README.md` and in [`schema`].
+//! Channels and their fields are listed in `recordings/README.md` and in [`schema`]; what Foxglove
+//! draws (URDF, transforms, strip scene, log) in [`scene`]. Log time = the run's wall-clock start +
+//! simulated time; publish time = log time.
 //!
 //! - [`read::Recording`] reads a file back, checking every chunk's CRC (a cut or corrupt file up to
 //!   its first bad chunk, saying where and why).
@@ -19,6 +21,7 @@ pub mod plots;
 pub mod read;
 pub mod replay;
 pub mod report;
+pub mod scene;
 pub mod schema;
 pub mod synthetic;
 pub mod tmpfs_test;
@@ -38,9 +41,12 @@ pub const STATUS_NO_ANSWER: u32 = 3;
 
 /// `/joint_torque.answered_tick` before any answer was applied.
 pub const NEVER_ANSWERED: u64 = u64::MAX;
+/// MCAP header profile of the files this crate writes: ROS 2 channels (`cdr`, `ros2msg`) and
+/// Foxglove channels (`protobuf`), log time = the run's wall-clock start + simulated time.
+pub const RECORDING_PROFILE: &str = "rig-weatherstrip";
 
 /// Format version of the files this crate writes (metadata `rig/recording_format`).
-pub const RECORDING_FORMAT_VERSION: u32 = 1;
+pub const RECORDING_FORMAT_VERSION: u32 = 2;
 
 /// Everything recorded for one tick. Fixed size and `Copy`, so the plant fills it on the stack and
 /// the queue copies it without touching the heap.
@@ -79,6 +85,10 @@ pub struct StripRecord {
     /// Bottom pressure at the centre-line nodes (x = 0), ordered by z, Pa. The nodes' z go once
     /// into the recording's metadata (key `centreline_z_m`, a JSON array of m).
     pub centreline_pressure_pa: [f64; MAX_CENTRELINE],
+    /// Normal (task +y) displacement of the top surface's centre line (the bulb's crest, x = 0)
+    /// at the same z as `centreline_pressure_pa`, m, bulge included; `n_centreline` valid. Drawn
+    /// by the decimated `/strip_scene` only (the per-tick `/strip` schema is unchanged).
+    pub top_centreline_uy_m: [f64; MAX_CENTRELINE],
 }
 
 /// Loop timing of one tick. Wall-clock times are CLOCK_REALTIME ns since the Unix epoch.
@@ -185,7 +195,8 @@ pub struct EventRecord {
     pub kind: EventKind,
     pub text: [u8; EVENT_TEXT_MAX],
     pub text_len: u16,
-    /// Wall clock (CLOCK_REALTIME ns) when the event was created; the MCAP publish time.
+    /// Wall clock (CLOCK_REALTIME ns) when the event was created (the MCAP stamps are the run's
+    /// start + `sim_time_s`, like every message's).
     pub wall_ns: u64,
 }
 
@@ -225,6 +236,7 @@ impl Default for StripRecord {
             top_displacement_m: 0.0,
             n_centreline: 0,
             centreline_pressure_pa: [0.0; MAX_CENTRELINE],
+            top_centreline_uy_m: [0.0; MAX_CENTRELINE],
         }
     }
 }
@@ -265,7 +277,8 @@ impl Default for TickRecord {
     }
 }
 
-/// Simulated time of a tick in ns: the MCAP log time of every message of that tick.
+/// Simulated time of a tick in ns: added to the run's wall-clock start, the MCAP log (and publish)
+/// time of every message of that tick.
 pub fn sim_time_ns(sim_time_s: f64) -> u64 {
     if sim_time_s <= 0.0 || !sim_time_s.is_finite() {
         0

@@ -132,7 +132,7 @@ pub struct Recording {
     pub controller: Vec<ControllerDiagnostics>,
     pub timing: Vec<TimingRow>,
     pub events: Vec<EventRow>,
-    /// Log time (simulated time, ns) of each `joint_state` row.
+    /// Log time (Unix ns: the run's wall-clock start + simulated time) of each `joint_state` row.
     pub log_time_ns: Vec<u64>,
     /// z of the centre-line nodes as the first `/strip` message carrying them has it, m.
     pub strip_centreline_z_m: Vec<f32>,
@@ -333,6 +333,12 @@ impl Recording {
     /// A value of the `rig` metadata written at the start (rig, mode, scenario, ...).
     pub fn rig_metadata(&self, key: &str) -> Option<&str> {
         self.metadata.get("rig")?.get(key).map(String::as_str)
+    }
+
+    /// The run's wall-clock start (Unix ns, metadata `rig/start_wall_ns`; 0 in files before
+    /// format 2): log time = this + simulated time.
+    pub fn start_wall_ns(&self) -> u64 {
+        self.rig_metadata("start_wall_ns").and_then(|v| v.parse().ok()).unwrap_or(0)
     }
 
     /// A value of the `recording_summary` metadata written by `finish`.

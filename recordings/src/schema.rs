@@ -2,7 +2,8 @@
 //! `ros2msg`), and the CDR encoder/decoder of each, kept side by side so field order cannot drift.
 //!
 //! Every field is SI (m, s, N, N m, Pa, rad); `tick` is the plant's tick number. Log time of
-//! every message is the simulated time of its tick in ns; publish time is the wall clock.
+//! every message is the run's wall-clock start + the simulated time of its tick in ns; publish
+//! time is the same.
 
 use crate::cdr::{CdrError, CdrReader, CdrWriter};
 use crate::{EventKind, EventRecord, TickRecord, TimingRecord, MAX_CENTRELINE};
@@ -363,7 +364,7 @@ pub struct EventRow {
     pub kind: Option<EventKind>,
     pub kind_name: String,
     pub text: String,
-    /// MCAP publish time (wall clock), ns.
+    /// MCAP publish time, ns: the run's wall-clock start + the event's simulated time.
     pub wall_ns: u64,
 }
 

@@ -47,6 +47,11 @@ pub struct RecorderConfig {
     pub metadata: Vec<(String, String)>,
     /// Serve the channels live over the Foxglove WebSocket protocol as they are written.
     pub live: Option<LiveConfig>,
+    /// What Foxglove draws (URDF, transforms, strip scene; [`crate::scene`]); None: only the
+    /// URDF-less channels (`/log` is written either way).
+    pub scene: Option<crate::scene::SceneConfig>,
+    /// Control period, s: the decimation of the scene (every `round(1 / (rate T))`-th tick).
+    pub period_s: f64,
 }
 
 impl RecorderConfig {
@@ -60,6 +65,8 @@ impl RecorderConfig {
             chunk_size_bytes: Self::DEFAULT_CHUNK_SIZE_BYTES,
             metadata: Vec::new(),
             live: None,
+            scene: None,
+            period_s: 1e-3,
         }
     }
 }
@@ -147,6 +154,7 @@ struct Slot {
     tick: MaybeUninit<TickHead>,
     event: MaybeUninit<EventRecord>,
     pressure_pa: [MaybeUninit<f32>; MAX_CENTRELINE],
+    top_uy_m: [MaybeUninit<f32>; MAX_CENTRELINE],
 }
 
 #[derive(Default)]
@@ -233,20 +241,26 @@ impl Recorder {
             Some((_, v)) => schema::parse_centreline_z(v).map_err(config_err)?,
             None => Vec::new(),
         };
+        let fox_defs = FoxgloveChannels::defs(cfg.scene.as_ref());
         // The live view first: an address it cannot serve on ends the start before a file exists.
         let live = match &cfg.live {
             Some(live_cfg) => {
                 let name = cfg.metadata.iter().find(|(k, _)| k == "rig").map_or("rig", |(_, v)| v.as_str());
-                let channels: Vec<LiveChannel<'_>> = CHANNELS
-                    .iter()
-                    .map(|ch| LiveChannel {
-                        topic: ch.topic,
-                        schema_name: ch.schema_name,
-                        schema_encoding: SCHEMA_ENCODING,
-                        schema: ch.schema_text.as_bytes(),
-                        message_encoding: MESSAGE_ENCODING,
-                    })
-                    .collect();
+                let ros = CHANNELS.iter().map(|ch| LiveChannel {
+                    topic: ch.topic,
+                    schema_name: ch.schema_name,
+                    schema_encoding: SCHEMA_ENCODING,
+                    schema: ch.schema_text.as_bytes(),
+                    message_encoding: MESSAGE_ENCODING,
+                });
+                let fox = fox_defs.iter().map(|d| LiveChannel {
+                    topic: d.topic,
+                    schema_name: &d.schema.0,
+                    schema_encoding: &d.schema.1,
+                    schema: &d.schema.2,
+                    message_encoding: d.message_encoding,
+                });
+                let channels: Vec<LiveChannel<'_>> = ros.chain(fox).collect();
                 Some(LiveView::start(live_cfg, &format!("rig {name}"), &channels)?)
             }
             None => None,
@@ -267,6 +281,9 @@ impl Recorder {
             .chunk_size(None)
             .disable_seeking(true)
             .library(format!("rig-recordings {}", env!("CARGO_PKG_VERSION")))
+            // Not `ros2`: that profile wants every channel cdr + ros2msg, and the Foxglove
+            // channels are protobuf. Ours says what to expect (recordings/README.md).
+            .profile(crate::RECORDING_PROFILE)
             .create(BufWriter::with_capacity(WRITE_SLICE_BYTES, SlicedFile(file, tally.clone())))
             .map_err(mcap_err)?;
         let mut channel_ids = [0u16; CHANNELS.len()];
@@ -274,11 +291,31 @@ impl Recorder {
             let schema_id = mcap.add_schema(ch.schema_name, SCHEMA_ENCODING, ch.schema_text.as_bytes()).map_err(mcap_err)?;
             *id = mcap.add_channel(schema_id, ch.topic, MESSAGE_ENCODING, &BTreeMap::new()).map_err(mcap_err)?;
         }
+        let fox = FoxgloveChannels::register(&mut mcap, &fox_defs).map_err(mcap_err)?;
+        // The run's wall-clock start, taken once: log time = start + simulated time.
+        let start_ns = wall_clock_ns();
         let mut meta: BTreeMap<String, String> = cfg.metadata.iter().cloned().collect();
+        meta.insert("start_wall_ns".into(), start_ns.to_string());
         meta.insert("recording_format".into(), RECORDING_FORMAT_VERSION.to_string());
         meta.insert("contract_version".into(), messages::CONTRACT_VERSION.to_string());
         meta.insert("created_wall_ns".into(), wall_clock_ns().to_string());
         mcap.write_metadata(&Metadata { name: "rig".into(), metadata: meta }).map_err(mcap_err)?;
+        let mut robot_description = Vec::new();
+        if let (Some(scene), Some(ch)) = (cfg.scene.as_ref(), fox.robot_description) {
+            let text = robot::urdf::urdf(&scene.tool);
+            let buf = &mut robot_description;
+            crate::cdr::CdrWriter::new(buf).string(&text);
+            let header = MessageHeader { channel_id: ch.id, sequence: 0, log_time: start_ns, publish_time: start_ns };
+            mcap.write_to_known_channel(&header, buf).map_err(mcap_err)?;
+            let attachment = mcap::Attachment {
+                log_time: start_ns,
+                create_time: start_ns,
+                name: "irb2400_wheel.urdf".into(),
+                media_type: "application/xml".into(),
+                data: std::borrow::Cow::Owned(text.into_bytes()),
+            };
+            mcap.attach(&attachment).map_err(mcap_err)?;
+        }
         mcap.flush().map_err(mcap_err)?;
 
         let (mut producer, mut consumer) = rtrb::RingBuffer::new(cfg.queue_capacity);
@@ -288,6 +325,7 @@ impl Recorder {
             tick: MaybeUninit::new(TickHead::of(&TickRecord::default())),
             event: MaybeUninit::new(EventRecord::new(0, 0.0, EventKind::Info, "")),
             pressure_pa: [MaybeUninit::new(0.0); MAX_CENTRELINE],
+            top_uy_m: [MaybeUninit::new(0.0); MAX_CENTRELINE],
         };
         for _ in 0..cfg.queue_capacity {
             let _ = producer.push(blank);
@@ -302,6 +340,13 @@ impl Recorder {
             buf: Vec::with_capacity(4096),
             centreline_z,
             pressure: Vec::with_capacity(MAX_CENTRELINE),
+            top_uy: Vec::with_capacity(MAX_CENTRELINE),
+            fox,
+            robot_description,
+            scene_every: cfg.scene.as_ref().map_or(1, |s| s.every_ticks(cfg.period_s)),
+            robot: cfg.scene.as_ref().map(|s| robot::Robot::irb2400_with_tool(s.tool)),
+            scene: cfg.scene.clone(),
+            start_ns,
             consumer,
             shared: shared.clone(),
             tuning,
@@ -358,6 +403,10 @@ impl Recorder {
             std::ptr::addr_of_mut!((*slot).tick).write(MaybeUninit::new(head));
             let dst = std::ptr::addr_of_mut!((*slot).pressure_pa) as *mut f32;
             for (i, &v) in r.strip.centreline_pressure_pa[..n].iter().enumerate() {
+                dst.add(i).write(v as f32);
+            }
+            let dst = std::ptr::addr_of_mut!((*slot).top_uy_m) as *mut f32;
+            for (i, &v) in r.strip.top_centreline_uy_m[..n].iter().enumerate() {
                 dst.add(i).write(v as f32);
             }
             chunk.commit(1);
@@ -446,6 +495,19 @@ struct WriterThread {
     centreline_z: Vec<f32>,
     /// Centre-line pressures of the tick being written.
     pressure: Vec<f32>,
+    /// Top centre-line displacements of the tick being written.
+    top_uy: Vec<f32>,
+    /// Ids of the Foxglove channels.
+    fox: FoxgloveChannels,
+    /// The `/robot_description` message (CDR), written once at the start of the file and offered
+    /// to the live view once a second, since a client may connect at any time.
+    robot_description: Vec<u8>,
+    /// Transforms and scene every this many ticks.
+    scene_every: u64,
+    robot: Option<robot::Robot>,
+    scene: Option<crate::scene::SceneConfig>,
+    /// The run's wall-clock start (Unix ns): log time = start + simulated time.
+    start_ns: u64,
     consumer: rtrb::Consumer<Slot>,
     shared: Arc<Shared>,
     tuning: RecorderTuning,
@@ -524,7 +586,7 @@ impl WriterThread {
 
     /// Takes the next slot: the tick head is copied out, its pressures go to `self.pressure`.
     fn pop(&mut self) -> Option<Popped> {
-        let Self { consumer, pressure, .. } = self;
+        let Self { consumer, pressure, top_uy, .. } = self;
         let chunk = consumer.read_chunk(1).ok()?;
         let slot = &chunk.as_slices().0[0];
         let item = match slot.kind {
@@ -534,6 +596,8 @@ impl WriterThread {
                 let n = head.strip.n_centreline as usize;
                 pressure.clear();
                 pressure.extend(slot.pressure_pa[..n].iter().map(|p| unsafe { p.assume_init() }));
+                top_uy.clear();
+                top_uy.extend(slot.top_uy_m[..n].iter().map(|p| unsafe { p.assume_init() }));
                 Popped::Tick(head)
             }
             // SAFETY: record_event wrote the event.
@@ -558,8 +622,9 @@ impl WriterThread {
     }
 
     fn write_tick(&mut self, r: &TickHead) -> Result<(), mcap::McapError> {
-        let log_time = sim_time_ns(r.state.sim_time_s);
-        let publish_time = if r.timing.publish_wall_ns != 0 { r.timing.publish_wall_ns } else { wall_clock_ns() };
+        let log_time = self.start_ns + sim_time_ns(r.state.sim_time_s);
+        // The tick's timeline stamp; the real publish wall clock is in /timing.
+        let publish_time = log_time;
         let dropped = self.shared.dropped_ticks.load(Ordering::Relaxed) + self.shared.dropped_events.load(Ordering::Relaxed);
         let Self { mcap, channel_ids, buf, centreline_z, pressure, bytes_since_flush, live, .. } = self;
         let mcap = mcap.as_mut().expect("checked by handle");
@@ -586,6 +651,7 @@ impl WriterThread {
         }
         schema::encode_timing(buf, r, dropped);
         put(5, buf)?;
+        self.write_scene(r, log_time)?;
         self.ticks_written += 1;
         self.last_tick = r.state.tick;
         self.last_sim_time_s = r.state.sim_time_s;
@@ -598,14 +664,65 @@ impl WriterThread {
         let header = MessageHeader {
             channel_id: self.channel_ids[6],
             sequence: e.tick as u32,
-            log_time: sim_time_ns(e.sim_time_s),
-            publish_time: e.wall_ns,
+            log_time: self.start_ns + sim_time_ns(e.sim_time_s),
+            publish_time: self.start_ns + sim_time_ns(e.sim_time_s),
         };
         self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
         if let Some(live) = self.live.as_mut() {
             live.offer(6, header.log_time, &self.buf, false);
         }
+        if let Some(ch) = self.fox.log {
+            crate::scene::encode_into(&crate::scene::log_message(e, header.log_time), &mut self.buf);
+            self.bytes_since_flush += self.buf.len() as u64 + 31;
+            let header = MessageHeader { channel_id: ch.id, ..header };
+            self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
+            if let Some(live) = self.live.as_mut() {
+                live.offer(ch.live, header.log_time, &self.buf, false);
+            }
+        }
         self.events_written += 1;
+        Ok(())
+    }
+
+    /// Every `scene_every`-th tick: the transforms and the strip scene (decided here, from the
+    /// tick records, so the loop does nothing for them).
+    fn write_scene(&mut self, r: &TickHead, log_time: u64) -> Result<(), mcap::McapError> {
+        let Self { mcap, buf, bytes_since_flush, live, fox, scene, robot, scene_every, centreline_z, pressure, top_uy, robot_description, .. } = self;
+        let (Some(cfg), Some(robot)) = (scene.as_ref(), robot.as_ref()) else { return Ok(()) };
+        if !r.state.tick.is_multiple_of(*scene_every) {
+            return Ok(());
+        }
+        let header = |channel_id| MessageHeader { channel_id, sequence: r.state.tick as u32, log_time, publish_time: log_time };
+        let mcap = mcap.as_mut().expect("checked by handle");
+        let mut put = |ch: FoxChannel, bytes: &[u8]| -> Result<(), mcap::McapError> {
+            *bytes_since_flush += bytes.len() as u64 + 31;
+            mcap.write_to_known_channel(&header(ch.id), bytes)?;
+            if let Some(live) = live.as_mut() {
+                live.offer(ch.live, log_time, bytes, true);
+            }
+            Ok(())
+        };
+        if let Some(ch) = fox.transforms {
+            crate::scene::encode_into(&crate::scene::frame_transforms(robot, cfg, &r.state.q, log_time), buf);
+            put(ch, buf)?;
+        }
+        if let Some(ch) = fox.scene {
+            let msg = crate::scene::scene_update(cfg, r, centreline_z, pressure, top_uy, log_time);
+            crate::scene::encode_into(&msg, buf);
+            put(ch, buf)?;
+        }
+        if let (Some(ch), true) = (fox.under_wheel, !pressure.is_empty()) {
+            let json = crate::scene::under_wheel_json(r, centreline_z, pressure);
+            put(ch, json.as_bytes())?;
+        }
+        // The robot description again for the live view (not the file), once a second of ticks:
+        // a client may connect at any time.
+        if let (Some(ch), Some(live)) = (fox.robot_description, live.as_mut()) {
+            let ticks_per_s = if r.state.period_s > 0.0 { (1.0 / r.state.period_s).round().max(1.0) as u64 } else { 1000 };
+            if r.state.tick.is_multiple_of(ticks_per_s) {
+                live.offer(ch.live, log_time, robot_description, false);
+            }
+        }
         Ok(())
     }
 
@@ -762,8 +879,9 @@ impl WriterThread {
         let mut body = Vec::new();
         body.extend_from_slice(&self.channel_ids[6].to_le_bytes());
         body.extend_from_slice(&(e.tick as u32).to_le_bytes());
-        body.extend_from_slice(&sim_time_ns(e.sim_time_s).to_le_bytes());
-        body.extend_from_slice(&e.wall_ns.to_le_bytes());
+        let ns = self.start_ns + sim_time_ns(e.sim_time_s);
+        body.extend_from_slice(&ns.to_le_bytes());
+        body.extend_from_slice(&ns.to_le_bytes());
         body.extend_from_slice(&self.buf);
         record(&mut out, op::MESSAGE, &body);
         let mut entries = Vec::new();
@@ -875,4 +993,69 @@ pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
         cur = c.source();
     }
     s
+}
+
+/// One Foxglove channel of a recording: where it is written and where the live view serves it.
+#[derive(Debug, Clone, Copy)]
+struct FoxChannel {
+    /// MCAP channel id.
+    id: u16,
+    /// Index among the live view's channels (after [`CHANNELS`]).
+    live: usize,
+}
+
+/// The Foxglove channels of a recording (None: not written in this one).
+#[derive(Debug, Default, Clone, Copy)]
+struct FoxgloveChannels {
+    robot_description: Option<FoxChannel>,
+    transforms: Option<FoxChannel>,
+    scene: Option<FoxChannel>,
+    under_wheel: Option<FoxChannel>,
+    log: Option<FoxChannel>,
+}
+
+/// A Foxglove channel's topic, schema (name, encoding, data) and message encoding.
+struct FoxDef {
+    topic: &'static str,
+    schema: (String, String, Vec<u8>),
+    message_encoding: &'static str,
+}
+
+impl FoxgloveChannels {
+    /// `/log` always, and with a scene `/robot_description`, `/tf`, `/strip_scene` and
+    /// `/pressure_under_wheel`, in registration order (the file's and the live view's).
+    fn defs(scene: Option<&crate::scene::SceneConfig>) -> Vec<FoxDef> {
+        use crate::scene::*;
+        let def = |topic, schema, message_encoding| FoxDef { topic, schema, message_encoding };
+        let mut d = Vec::new();
+        if scene.is_some() {
+            let string = ("std_msgs/msg/String".to_string(), SCHEMA_ENCODING.to_string(), ROBOT_DESCRIPTION_SCHEMA.as_bytes().to_vec());
+            d.push(def(ROBOT_DESCRIPTION_TOPIC, string, MESSAGE_ENCODING));
+            d.push(def(TRANSFORMS_TOPIC, schema_of::<foxglove::messages::FrameTransforms>(), "protobuf"));
+            d.push(def(SCENE_TOPIC, schema_of::<foxglove::messages::SceneUpdate>(), "protobuf"));
+            let json = ("rig.PressureUnderWheel".to_string(), "jsonschema".to_string(), UNDER_WHEEL_SCHEMA.as_bytes().to_vec());
+            d.push(def(UNDER_WHEEL_TOPIC, json, "json"));
+        }
+        d.push(def(LOG_TOPIC, schema_of::<foxglove::messages::Log>(), "protobuf"));
+        d
+    }
+
+    /// Registers `defs` in the file; the live view numbers them after [`CHANNELS`].
+    fn register(mcap: &mut McapFile, defs: &[FoxDef]) -> Result<Self, mcap::McapError> {
+        let mut ch = FoxgloveChannels::default();
+        for (i, d) in defs.iter().enumerate() {
+            let (name, encoding, data) = &d.schema;
+            let schema_id = mcap.add_schema(name, encoding, data)?;
+            let id = mcap.add_channel(schema_id, d.topic, d.message_encoding, &BTreeMap::new())?;
+            let slot = match d.topic {
+                crate::scene::ROBOT_DESCRIPTION_TOPIC => &mut ch.robot_description,
+                crate::scene::TRANSFORMS_TOPIC => &mut ch.transforms,
+                crate::scene::SCENE_TOPIC => &mut ch.scene,
+                crate::scene::UNDER_WHEEL_TOPIC => &mut ch.under_wheel,
+                _ => &mut ch.log,
+            };
+            *slot = Some(FoxChannel { id, live: CHANNELS.len() + i });
+        }
+        Ok(ch)
+    }
 }

@@ -13,18 +13,30 @@ fn a_write_error_mid_run_stops_the_recording_and_keeps_the_complete_chunks() {
     let dir = std::env::temp_dir().join(format!("recordings-werr-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("limited.mcap");
-    let limit: u64 = 400 << 10;
+    let run = SyntheticRun { ticks: 4000, ..Default::default() };
+    let config = |path: &std::path::Path| {
+        let mut cfg = RecorderConfig::new(path);
+        cfg.chunk_size_bytes = 64 << 10;
+        cfg.metadata = run.metadata();
+        cfg
+    };
+    // The limit falls 64 bytes past the start of a chunk (the last one starting before 400 KiB
+    // in the same recording made without a limit): the file is cut back to where that chunk
+    // starts (the one before it complete with its message indexes) and has no room for its end.
+    // The writer closes chunks by size here, so both runs lay them out alike.
+    let dry = dir.join("unlimited.mcap");
+    run.record(config(&dry)).unwrap();
+    let bytes = std::fs::read(&dry).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+    let chunk_start = summary.chunk_indexes.iter().map(|c| c.chunk_start_offset).filter(|&e| e < 400 << 10).max().unwrap();
+    let limit: u64 = chunk_start + 64;
     // SAFETY: plain syscalls; SIGXFSZ ignored so the write returns EFBIG instead of killing us.
     unsafe {
         libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
         let lim = libc::rlimit { rlim_cur: limit, rlim_max: libc::RLIM_INFINITY };
         assert_eq!(libc::setrlimit(libc::RLIMIT_FSIZE, &lim), 0);
     }
-    let run = SyntheticRun { ticks: 4000, ..Default::default() };
-    let mut cfg = RecorderConfig::new(&path);
-    cfg.chunk_size_bytes = 64 << 10;
-    cfg.metadata = run.metadata();
-    let mut rec = Recorder::start(cfg).unwrap();
+    let mut rec = Recorder::start(config(&path)).unwrap();
     let mut accepted = 0u64;
     for k in 0..run.ticks {
         while rec.queue_free() == 0 {

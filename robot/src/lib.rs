@@ -13,6 +13,7 @@ pub mod params;
 pub mod scenario;
 mod spatial;
 pub mod tool;
+pub mod urdf;
 
 pub use ik::IkError;
 pub use kinematics::Frames;

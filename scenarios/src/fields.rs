@@ -270,6 +270,7 @@ pub static FIELDS: &[Field] = &[
     flag("recording.enabled", "Record the run to MCAP."),
     int("recording.queue_capacity", "records", range(lo_in(16.0), hi_in(1048576.0)), "Bounded queue between the loop thread and the writer thread."),
     int("recording.chunk_size_bytes", "bytes", range(lo_in(1024.0), hi_in(1073741824.0)), "MCAP chunk size bound (a killed run loses at most the open chunk)."),
+    num("recording.scene_rate_hz", "Hz", range(lo_ex(0.0), per(1.0, "loop.period_s", true)), "Rate of the Foxglove channels `/tf` (`foxglove.FrameTransforms`) and `/strip_scene` (`foxglove.SceneUpdate`): every round(1 / (rate period))-th tick; at most one per tick."),
     // [safety]
     num("safety.max_tcp_speed_mps", "m/s", POSITIVE, "Reflex: TCP speed limit (ISO 10218-1's reduced speed, 0.25 m/s, by default); crossing it stops the plant at once."),
     num("safety.max_contact_force_n", "N", POSITIVE, "Reflex: limit on the magnitude of the wheel–strip force; crossing it stops the plant at once."),

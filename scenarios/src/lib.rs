@@ -455,11 +455,14 @@ pub struct RecordingConfig {
     pub queue_capacity: usize,
     /// MCAP chunk size bound, bytes (a killed run loses at most the open chunk).
     pub chunk_size_bytes: u64,
+    /// Rate of the Foxglove transforms and strip scene, Hz of simulated time (decimated from
+    /// the ticks on the writer thread).
+    pub scene_rate_hz: f64,
 }
 
 impl Default for RecordingConfig {
     fn default() -> Self {
-        Self { enabled: true, queue_capacity: 8192, chunk_size_bytes: 512 * 1024 }
+        Self { enabled: true, queue_capacity: 8192, chunk_size_bytes: 512 * 1024, scene_rate_hz: 100.0 }
     }
 }
 

@@ -11,6 +11,8 @@ import wsProtocol from "@foxglove/ws-protocol";
 import { parse } from "@foxglove/rosmsg";
 import { MessageReader } from "@foxglove/rosmsg2-serialization";
 import WebSocket from "ws";
+import protobuf from "protobufjs";
+import descriptorExt from "protobufjs/ext/descriptor/index.js";
 
 const { FoxgloveClient } = wsProtocol; // a CommonJS package
 
@@ -34,6 +36,12 @@ function decoderFor(ch) {
   if (ch.encoding === "cdr" && ch.schemaEncoding === "ros2msg") {
     const reader = new MessageReader(parse(ch.schema, { ros2: true }));
     return (data) => reader.readMessage(data);
+  }
+  if (ch.encoding === "protobuf" && ch.schemaEncoding === "protobuf") {
+    // The advertised schema of a binary schema encoding is the FileDescriptorSet in base64.
+    const fds = descriptorExt.FileDescriptorSet.decode(Buffer.from(ch.schema, "base64"));
+    const type = protobuf.Root.fromDescriptor(fds).lookupType(ch.schemaName);
+    return (data) => type.toObject(type.decode(new Uint8Array(data.buffer, data.byteOffset, data.byteLength)), { longs: String });
   }
   if (ch.encoding === "json") {
     const text = new TextDecoder();
@@ -105,8 +113,11 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
       if (!v.every(Number.isFinite)) fail(`/joint_state tick ${msg.tick}: ${key} not finite: ${v}`);
     }
     if (samples.length < 200) samples.push({ tick: Number(msg.tick), sim_time: msg.sim_time, q: Array.from(msg.q) });
-    if (!untilClose && BigInt(t.lastLogNs) - BigInt(t.firstLogNs) >= wantNs) finish();
   }
+  // Done once every per-tick channel received so far spans the wanted log time (each starts when
+  // its subscription does, and a tick's channels arrive one after the other).
+  const spans = Object.values(topics).filter((x) => x.firstTick !== null);
+  if (!untilClose && spans.length > 0 && spans.every((x) => BigInt(x.lastLogNs) - BigInt(x.firstLogNs) >= wantNs)) finish();
 });
 
 function finish() {

@@ -1,0 +1,404 @@
+//! What Foxglove draws (DESIGN section 8): the robot's URDF, `foxglove.FrameTransforms` from the
+//! recorded q, a `foxglove.SceneUpdate` of the strip coloured by bottom pressure, and `/events`
+//! again as `foxglove.Log`. Encoded on the writer thread (protobuf, with the schema descriptors
+//! of the `foxglove` crate), the transforms and the scene at a decimated rate.
+//!
+//! Frames: `base` (the robot's base, the root), the URDF's `link1`..`link6`, `flange`, `tcp`
+//! (see [`robot::urdf`]) and `task` (origin at the strip's start, bottom centre; x across, y up,
+//! z along the strip: DESIGN section 3). The strip scene is drawn in `task`, the wheel in `tcp`.
+
+use foxglove::messages::{
+    log, ArrowPrimitive, Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, LinePrimitive, Log, Point3, Pose,
+    Quaternion, SceneEntity, SceneUpdate, TextPrimitive, Timestamp, TriangleListPrimitive, Vector3,
+};
+use foxglove::Encode;
+use nalgebra::{Isometry3, UnitQuaternion};
+use robot::{Robot, Tool, Vec6};
+
+use crate::schema::TickHead;
+use crate::{EventKind, EventRecord};
+
+/// Default rate of the transforms and the scene (scenario `recording.scene_rate_hz`).
+pub const DEFAULT_SCENE_RATE_HZ: f64 = 100.0;
+
+/// Top of the pressure colour scale, Pa; the scale runs from 0 (and below) to this.
+pub const COLOUR_SCALE_MAX_PA: f64 = 200e3;
+/// The bond criterion (DESIGN section 4): centre-line bottom pressure of at least 100 kPa.
+pub const BOND_PRESSURE_PA: f64 = 100e3;
+/// Arrow length per newton of contact force, m/N (10 N: 20 mm).
+pub const ARROW_M_PER_N: f64 = 2e-3;
+
+/// Topics of the Foxglove channels, in the order the writer registers them after
+/// [`crate::schema::CHANNELS`].
+pub const ROBOT_DESCRIPTION_TOPIC: &str = "/robot_description";
+pub const TRANSFORMS_TOPIC: &str = "/tf";
+pub const SCENE_TOPIC: &str = "/strip_scene";
+pub const LOG_TOPIC: &str = "/log";
+pub const UNDER_WHEEL_TOPIC: &str = "/pressure_under_wheel";
+
+/// `/pressure_under_wheel` (JSON, at the scene rate): the centre-line bottom pressure under the
+/// wheel (linear interpolation at `wheel_z`, as `rig report` computes it) beside the constant
+/// bond line, so a Plot panel draws both.
+pub const UNDER_WHEEL_SCHEMA: &str = r#"{"title":"rig.PressureUnderWheel","type":"object","properties":{"tick":{"type":"integer"},"wheel_z_m":{"type":"number","description":"m, wheel position along the strip"},"pressure_pa":{"type":"number","description":"Pa, centre-line bottom pressure under the wheel"},"bond_line_pa":{"type":"number","description":"Pa, the bond criterion (100 kPa)"}}}"#;
+
+/// The `/pressure_under_wheel` message of one tick.
+pub fn under_wheel_json(r: &TickHead, centreline_z_m: &[f32], pressure_pa: &[f32]) -> String {
+    let p = interp(centreline_z_m, pressure_pa, r.strip.wheel_z_m);
+    format!(
+        r#"{{"tick":{},"wheel_z_m":{},"pressure_pa":{},"bond_line_pa":{}}}"#,
+        r.state.tick, r.strip.wheel_z_m, p, BOND_PRESSURE_PA
+    )
+}
+
+/// `/robot_description`: the URDF once, as ROS 2 `std_msgs/msg/String` (what Foxglove's URDF
+/// layer reads from a topic).
+pub const ROBOT_DESCRIPTION_SCHEMA: &str = "string data\n";
+
+/// What the writer needs to draw the run; the plant fills it from its scenario and strip model.
+#[derive(Debug, Clone)]
+pub struct SceneConfig {
+    /// Transforms and scene per second of simulated time (every `round(1 / (rate T))`-th tick).
+    pub rate_hz: f64,
+    pub tool: Tool,
+    /// The task frame in the base frame.
+    pub task_in_base: Isometry3<f64>,
+    /// The strip, if the scenario has one.
+    pub strip: Option<StripGeometry>,
+}
+
+/// The strip as the scene draws it (task frame, m).
+#[derive(Debug, Clone)]
+pub struct StripGeometry {
+    /// Rest coordinates of the top-surface nodes, layer by layer (z), then by x (the strip
+    /// model's input order), `nodes_per_layer` a layer.
+    pub top_xyz_m: Vec<[f64; 3]>,
+    pub nodes_per_layer: usize,
+    /// The substrate's surface under the centre line (the bulge): (z, height along task y), m,
+    /// ascending z, as the strip model has it.
+    pub substrate_zy_m: Vec<[f64; 2]>,
+    pub length_m: f64,
+    pub half_width_m: f64,
+}
+
+impl SceneConfig {
+    /// The task frame of a scenario's placement: origin (strip_start_x, strip_y, table_z) in the
+    /// base; task x = base y, task y = base z, task z = base x.
+    pub fn task_frame(strip_start_x_m: f64, strip_y_m: f64, table_z_m: f64) -> Isometry3<f64> {
+        let rot = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0));
+        Isometry3::from_parts(nalgebra::Translation3::new(strip_start_x_m, strip_y_m, table_z_m), UnitQuaternion::from_rotation_matrix(&rot))
+    }
+
+    /// Ticks between two scene samples at control period `period_s` (at least 1).
+    pub fn every_ticks(&self, period_s: f64) -> u64 {
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        if !positive(self.rate_hz) || !positive(period_s) {
+            return 1;
+        }
+        ((1.0 / (self.rate_hz * period_s)).round() as u64).max(1)
+    }
+}
+
+/// A Unix-ns time as a Foxglove timestamp.
+pub fn timestamp(ns: u64) -> Timestamp {
+    Timestamp::new((ns / 1_000_000_000) as u32, (ns % 1_000_000_000) as u32)
+}
+
+fn vec3(v: &nalgebra::Vector3<f64>) -> Vector3 {
+    Vector3 { x: v.x, y: v.y, z: v.z }
+}
+
+fn quat(q: &UnitQuaternion<f64>) -> Quaternion {
+    Quaternion { x: q.i, y: q.j, z: q.k, w: q.w }
+}
+
+fn pose(iso: &Isometry3<f64>) -> Pose {
+    Pose { position: Some(vec3(&iso.translation.vector)), orientation: Some(quat(&iso.rotation)) }
+}
+
+fn at(x: f64, y: f64, z: f64) -> Pose {
+    pose(&Isometry3::translation(x, y, z))
+}
+
+fn rgba(c: [f64; 4]) -> Color {
+    Color { r: c[0], g: c[1], b: c[2], a: c[3] }
+}
+
+/// The colour of a bottom pressure (Pa): below the 100 kPa bond line a blue that lightens from
+/// dark (0 Pa and tension) to light (just under 100 kPa); from 100 kPa on a yellow that turns
+/// red at [`COLOUR_SCALE_MAX_PA`] and beyond. With t = p / 100 kPa clamped to [0, 1] below the
+/// line and t = (p - 100 kPa) / 100 kPa clamped to [0, 1] above it:
+/// below: (0.1 + 0.5 t, 0.2 + 0.6 t, 0.6 + 0.4 t); above: (1, 0.9 (1 - t), 0.1 (1 - t)); alpha 1.
+pub fn pressure_colour(p_pa: f64) -> [f64; 4] {
+    if p_pa < BOND_PRESSURE_PA {
+        let t = (p_pa / BOND_PRESSURE_PA).clamp(0.0, 1.0);
+        [0.1 + 0.5 * t, 0.2 + 0.6 * t, 0.6 + 0.4 * t, 1.0]
+    } else {
+        let t = ((p_pa - BOND_PRESSURE_PA) / (COLOUR_SCALE_MAX_PA - BOND_PRESSURE_PA)).clamp(0.0, 1.0);
+        [1.0, 0.9 * (1.0 - t), 0.1 * (1.0 - t), 1.0]
+    }
+}
+
+/// Mesh vertices are rounded to 2^-20 m (about 1 um, against displacements of 0.1-0.4 mm) and their
+/// colours to 1/256: binary steps leave the low bytes of each float64 zero, which zstd then
+/// compresses away (the scene is most of the file otherwise).
+pub const POSITION_STEP_M: f64 = 1.0 / (1u64 << 20) as f64;
+pub const COLOUR_STEP: f64 = 1.0 / 256.0;
+
+fn quantise(v: f64, step: f64) -> f64 {
+    (v / step).round() * step
+}
+
+/// Linear interpolation of `v` over ascending `z` at `x`, held beyond the ends.
+fn interp(z: &[f32], v: &[f32], x: f64) -> f64 {
+    interp_from(z, v, x, &mut 1)
+}
+
+/// [`interp`] starting its search at `*from` (and leaving it where it found `x`): a run of
+/// ascending `x` costs one pass over `z` in all.
+fn interp_from(z: &[f32], v: &[f32], x: f64, from: &mut usize) -> f64 {
+    let n = z.len().min(v.len());
+    if n == 0 {
+        return 0.0;
+    }
+    if x <= z[0] as f64 {
+        return v[0] as f64;
+    }
+    if *from < 1 || *from > n || x <= z[*from - 1] as f64 {
+        *from = 1;
+    }
+    for i in *from..n {
+        if x <= z[i] as f64 {
+            *from = i;
+            let (z0, z1) = (z[i - 1] as f64, z[i] as f64);
+            let s = if z1 > z0 { (x - z0) / (z1 - z0) } else { 0.0 };
+            return (1.0 - s) * v[i - 1] as f64 + s * v[i] as f64;
+        }
+    }
+    v[n - 1] as f64
+}
+
+/// `foxglove.FrameTransforms` of one tick: the URDF chain base → link1 → ... → link6 → flange →
+/// tcp from the robot's forward kinematics of the recorded q, and base → task.
+pub fn frame_transforms(robot: &Robot, cfg: &SceneConfig, q: &[f64; 6], ns: u64) -> FrameTransforms {
+    let edges = robot::urdf::chain_from_fk(robot, &Vec6::from(*q));
+    let ts = Some(timestamp(ns));
+    let names = robot::urdf::LINK_NAMES;
+    let mut transforms: Vec<FrameTransform> = edges
+        .iter()
+        .enumerate()
+        .map(|(k, e)| FrameTransform {
+            timestamp: ts,
+            parent_frame_id: names[k].into(),
+            child_frame_id: names[k + 1].into(),
+            translation: Some(vec3(&e.translation.vector)),
+            rotation: Some(quat(&e.rotation)),
+        })
+        .collect();
+    transforms.push(FrameTransform {
+        timestamp: ts,
+        parent_frame_id: "base".into(),
+        child_frame_id: "task".into(),
+        translation: Some(vec3(&cfg.task_in_base.translation.vector)),
+        rotation: Some(quat(&cfg.task_in_base.rotation)),
+    });
+    FrameTransforms { transforms }
+}
+
+/// `foxglove.SceneUpdate` of one tick: the strip's top surface (one vertex per top node, displaced
+/// along task y by the recorded top centre-line displacement at its z, coloured by the recorded
+/// centre-line bottom pressure at its z, [`pressure_colour`]), the substrate with its bulge,
+/// the colour scale with the 100 kPa bond line, the wheel, and the contact force as an arrow.
+/// `pressure_pa`, `top_uy_m`: the tick's centre-line values at the nodes `centreline_z_m`.
+pub fn scene_update(cfg: &SceneConfig, r: &TickHead, centreline_z_m: &[f32], pressure_pa: &[f32], top_uy_m: &[f32], ns: u64) -> SceneUpdate {
+    let ts = Some(timestamp(ns));
+    let entity = |id: &str, frame: &str| SceneEntity { timestamp: ts, frame_id: frame.into(), id: id.into(), frame_locked: true, ..Default::default() };
+    let mut entities = Vec::new();
+    let tool = &cfg.tool;
+    // The wheel, in the TCP frame (its axis is the tool y axis).
+    let mut wheel = entity("wheel", "tcp");
+    let d = 2.0 * tool.wheel_radius_m;
+    wheel.cylinders.push(CylinderPrimitive {
+        pose: Some(pose(&Isometry3::from_parts(
+            nalgebra::Translation3::identity(),
+            UnitQuaternion::from_axis_angle(&nalgebra::Vector3::x_axis(), std::f64::consts::FRAC_PI_2),
+        ))),
+        size: Some(Vector3 { x: d, y: d, z: robot::urdf::WHEEL_WIDTH_M }),
+        bottom_scale: 1.0,
+        top_scale: 1.0,
+        color: Some(rgba([0.1, 0.1, 0.1, 0.9])),
+    });
+    entities.push(wheel);
+    if let Some(g) = &cfg.strip {
+        let s = &r.strip;
+        let mut strip = entity("strip", "task");
+        let n = g.top_xyz_m.len();
+        let mut points = Vec::with_capacity(n);
+        let mut colors = Vec::with_capacity(n);
+        // The nodes come layer by layer in ascending z: one cursor per quantity.
+        let (mut at_u, mut at_p) = (1, 1);
+        for p in &g.top_xyz_m {
+            let uy = interp_from(centreline_z_m, top_uy_m, p[2], &mut at_u);
+            let z = quantise(p[2], POSITION_STEP_M);
+            points.push(Point3 { x: quantise(p[0], POSITION_STEP_M), y: quantise(p[1] + uy, POSITION_STEP_M), z });
+            // the colour of the vertex as drawn (at its rounded z)
+            let c = pressure_colour(interp_from(centreline_z_m, pressure_pa, z, &mut at_p));
+            colors.push(rgba(c.map(|v| quantise(v, COLOUR_STEP))));
+        }
+        let per = g.nodes_per_layer.max(1);
+        let layers = n / per;
+        let mut indices = Vec::with_capacity(6 * layers.saturating_sub(1) * per.saturating_sub(1));
+        for k in 0..layers.saturating_sub(1) {
+            for j in 0..per - 1 {
+                let (a, b) = ((k * per + j) as u32, (k * per + j + 1) as u32);
+                let (c, e) = (a + per as u32, b + per as u32);
+                indices.extend_from_slice(&[a, b, e, a, e, c]);
+            }
+        }
+        strip.triangles.push(TriangleListPrimitive { pose: Some(at(0.0, 0.0, 0.0)), points, color: None, colors, indices });
+        entities.push(strip);
+
+        // The substrate's surface along the centre line: the bulge.
+        let mut substrate = entity("bulge", "task");
+        let points = g.substrate_zy_m.iter().map(|&[z, y]| Point3 { x: 0.0, y, z }).collect();
+        substrate.lines.push(LinePrimitive {
+            r#type: foxglove::messages::line_primitive::Type::LineStrip as i32,
+            pose: Some(at(-g.half_width_m - 1e-3, 0.0, 0.0)),
+            thickness: 0.6e-3,
+            scale_invariant: false,
+            points,
+            color: Some(rgba([0.2, 0.2, 0.2, 1.0])),
+            ..Default::default()
+        });
+        entities.push(substrate);
+
+        // The colour scale beside the strip: 0..200 kPa along task z, the bond line at 100 kPa.
+        let mut scale = entity("pressure_scale", "task");
+        let (x0, cells) = (g.half_width_m + 6e-3, 20);
+        let cell_m = g.length_m / cells as f64;
+        for i in 0..cells {
+            let p = COLOUR_SCALE_MAX_PA * (i as f64 + 0.5) / cells as f64;
+            scale.cubes.push(CubePrimitive {
+                pose: Some(at(x0, 0.0, cell_m * (i as f64 + 0.5))),
+                size: Some(Vector3 { x: 3e-3, y: 1e-3, z: cell_m }),
+                color: Some(rgba(pressure_colour(p))),
+            });
+        }
+        let z_bond = g.length_m * BOND_PRESSURE_PA / COLOUR_SCALE_MAX_PA;
+        scale.lines.push(LinePrimitive {
+            r#type: foxglove::messages::line_primitive::Type::LineStrip as i32,
+            pose: Some(at(0.0, 0.0, 0.0)),
+            thickness: 0.5e-3,
+            points: vec![Point3 { x: x0 - 3e-3, y: 0.6e-3, z: z_bond }, Point3 { x: x0 + 3e-3, y: 0.6e-3, z: z_bond }],
+            color: Some(rgba([0.0, 0.0, 0.0, 1.0])),
+            ..Default::default()
+        });
+        for (z, text) in [(0.0, "0 kPa"), (z_bond, "100 kPa bond"), (g.length_m, "200 kPa")] {
+            scale.texts.push(TextPrimitive {
+                pose: Some(at(x0 + 4e-3, 1e-3, z)),
+                billboard: true,
+                font_size: 12.0,
+                scale_invariant: true,
+                color: Some(rgba([0.0, 0.0, 0.0, 1.0])),
+                text: text.into(),
+            });
+        }
+        entities.push(scale);
+
+        // The contact force on the strip: an arrow from above ending on the top under the wheel.
+        let f = s.contact_force_n;
+        let mut arrow = entity("contact_force", "task");
+        if f < 0.0 {
+            let len = -f * ARROW_M_PER_N;
+            let top = crate::scene::STRIP_TOP_M + s.top_displacement_m;
+            // The arrow points along its pose's +x: turned to -y (pressing).
+            let rot = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), -std::f64::consts::FRAC_PI_2);
+            let iso = Isometry3::from_parts(nalgebra::Translation3::new(0.0, top + len, s.wheel_z_m), rot);
+            arrow.arrows.push(ArrowPrimitive {
+                pose: Some(pose(&iso)),
+                shaft_length: 0.7 * len,
+                shaft_diameter: 0.6e-3,
+                head_length: 0.3 * len,
+                head_diameter: 1.6e-3,
+                color: Some(rgba([0.85, 0.1, 0.1, 1.0])),
+            });
+        }
+        entities.push(arrow);
+    }
+    SceneUpdate { deletions: Vec::new(), entities }
+}
+
+/// Height of the strip's top at its centre line, m (the plant's contact surface at rest).
+pub const STRIP_TOP_M: f64 = scenario::STRIP_TOP_HEIGHT_M;
+
+/// The Log level of an event kind: faults and refusals are errors, safe stops, reflexes and
+/// misses warnings, the rest information.
+pub fn log_level(kind: EventKind) -> log::Level {
+    use EventKind::*;
+    match kind {
+        Fault | RecordingError | VersionMismatch | TorqueRefused | ControllerEnded => log::Level::Error,
+        SafeStop | Reflex | EndStop | Miss | ForeignTorque => log::Level::Warning,
+        Start | Stop | ModeChange | ControllerChange | SafeStopCleared | Info => log::Level::Info,
+    }
+}
+
+/// `/events` entry as `foxglove.Log`: name = the kind's name, message = "tick N: text".
+pub fn log_message(e: &EventRecord, ns: u64) -> Log {
+    Log {
+        timestamp: Some(timestamp(ns)),
+        level: log_level(e.kind) as i32,
+        message: format!("tick {}: {}", e.tick, e.text()),
+        name: e.kind.name().into(),
+        file: String::new(),
+        line: 0,
+    }
+}
+
+/// Schema name, encoding and data of a Foxglove message type, for the writer.
+pub fn schema_of<T: Encode>() -> (String, String, Vec<u8>) {
+    let s = T::get_schema().expect("the foxglove schemas have descriptors");
+    (s.name, s.encoding, s.data.into_owned())
+}
+
+/// Encodes `msg` into `buf` (cleared first).
+pub fn encode_into<T: Encode>(msg: &T, buf: &mut Vec<u8>) {
+    buf.clear();
+    msg.encode(buf).expect("a Vec grows");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The cursor search gives what the plain one does, for ascending, repeated and falling x.
+    #[test]
+    fn interpolation_with_a_cursor_is_the_plain_interpolation() {
+        let z = [0.0f32, 0.001, 0.002, 0.004, 0.008];
+        let v = [1.0f32, -2.0, 3.0, 5.0, 0.5];
+        let mut at = 1;
+        for x in [-0.001, 0.0, 0.0005, 0.0005, 0.0015, 0.003, 0.0079, 0.009, 0.0012, 0.0, 0.006] {
+            let plain = {
+                let i = z.iter().position(|&zi| x <= zi as f64);
+                match i {
+                    Some(0) => v[0] as f64,
+                    Some(i) => {
+                        let s = (x - z[i - 1] as f64) / (z[i] as f64 - z[i - 1] as f64);
+                        (1.0 - s) * v[i - 1] as f64 + s * v[i] as f64
+                    }
+                    None => v[4] as f64,
+                }
+            };
+            assert_eq!(interp_from(&z, &v, x, &mut at), plain, "x = {x}");
+        }
+    }
+
+    /// The colour map at its documented points.
+    #[test]
+    fn pressure_colours_at_the_documented_points() {
+        assert_eq!(pressure_colour(-5e3), [0.1, 0.2, 0.6, 1.0]);
+        assert_eq!(pressure_colour(0.0), [0.1, 0.2, 0.6, 1.0]);
+        assert_eq!(pressure_colour(100e3), [1.0, 0.9, 0.1, 1.0]);
+        assert_eq!(pressure_colour(300e3), [1.0, 0.0, 0.0, 1.0]);
+        let below = pressure_colour(99.999e3);
+        assert!((below[0] - 0.6).abs() < 1e-4 && (below[1] - 0.8).abs() < 1e-4 && (below[2] - 1.0).abs() < 1e-4);
+    }
+}
