@@ -25,6 +25,8 @@ pub struct RigLaunch {
     pub controller_cpu: Option<usize>,
     /// Daemons log warnings and errors only (unless RUST_LOG says otherwise): for `rig sweep`.
     pub quiet: bool,
+    /// The plant runs the host-floor probe (`plant-sim --host-probe`): for `rig timing`.
+    pub host_probe: bool,
 }
 
 /// How a supervised run ended.
@@ -246,6 +248,9 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     }
     if let Some(d) = l.duration_s {
         plant_cmd.arg("--duration").arg(d.to_string());
+    }
+    if l.host_probe {
+        plant_cmd.arg("--host-probe");
     }
     let mut plant = spawn(&mut plant_cmd, "plant", &l.plant_bin)?;
     let mut plant_out = plant.stdout.take().context("plant stdout")?;

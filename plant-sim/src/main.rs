@@ -1,4 +1,4 @@
-//! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR]`
+//! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR] [--host-probe]`
 //!
 //! Runs the plant daemon; at exit prints one line of JSON with the run's summary on stdout.
 //! Exit status: 0 run completed, 1 error, 69 the rig name is held by a live plant, 71 shared
@@ -32,6 +32,10 @@ struct Args {
     /// else `~/.cache/rig/strip`).
     #[arg(long)]
     cache_dir: Option<PathBuf>,
+    /// Run the host-floor probe beside the loop (a thread per CPU waking on 1 ms deadlines;
+    /// real time only): its latency and stalls go into the summary and `/timing`.
+    #[arg(long)]
+    host_probe: bool,
 }
 
 fn main() {
@@ -45,6 +49,7 @@ fn main() {
         duration_s: a.duration,
         out: a.out,
         cache_dir: a.cache_dir.unwrap_or_else(strip::cache::cache_dir),
+        host_probe: a.host_probe,
     };
     match plant_sim::run::run(&opts) {
         // Both writes tolerate a closed pipe: a launcher killed with SIGKILL leaves its end closed.

@@ -28,6 +28,8 @@ pub struct RunOptions {
     /// MCAP file; None = `runs/<unix time>-<rig>/run.mcap`.
     pub out: Option<PathBuf>,
     pub cache_dir: PathBuf,
+    /// Run the host-floor probe beside the loop (real time only; `rig timing` asks for it).
+    pub host_probe: bool,
 }
 
 /// Run length when neither the command line nor the scenario sets one: the nominal trajectory
@@ -55,6 +57,8 @@ pub struct RunSummary {
     pub recording_stopped_early: Option<String>,
     pub mode: Mode,
     pub rt: rt::RtSetup,
+    /// What the host-floor probe measured, per CPU (None: it did not run).
+    pub probe: Option<Vec<crate::probe::CpuReport>>,
 }
 
 impl RunSummary {
@@ -92,6 +96,10 @@ impl RunSummary {
             "jitter": s.jitter.to_json(&edges),
             "plant_compute": s.plant_compute.to_json(&edges),
             "controller_compute": s.controller_compute.to_json(&edges),
+            "host_probe": self.probe.as_ref().map(|cpus| serde_json::json!({
+                "stall_threshold_us": crate::probe::HOST_STALL_NS as f64 * 1e-3,
+                "cpus": cpus.iter().map(|c| c.to_json(&edges)).collect::<Vec<_>>(),
+            })),
         })
     }
 }
@@ -230,6 +238,20 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         r.record_event(&EventRecord::new(0, 0.0, EventKind::Start, &text));
     }
 
+    // The host-floor probe, one thread per CPU this process may use (README, "Timing").
+    let probe = match (opts.host_probe, mode) {
+        (true, Mode::Realtime) => {
+            let cpus = crate::probe::allowed_cpus();
+            let p = crate::probe::Probe::start(&cpus, period_ns).context("starting the host probe")?;
+            tracing::info!(?cpus, "host probe running (SCHED_FIFO {} when permitted)", crate::probe::PROBE_PRIORITY);
+            Some(p)
+        }
+        (true, Mode::Lockstep) => {
+            tracing::warn!("--host-probe applies to real-time runs only; not started in lockstep");
+            None
+        }
+        _ => None,
+    };
     let stats = PlantLoop {
         ports: &ports,
         physics: &mut physics,
@@ -240,8 +262,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         arbiter: &mut arbiter,
         watch: Some(&watch),
         reflex_limits: crate::limits::ReflexLimits::from_scenario(&scenario),
+        probe: probe.as_ref().map(|p| &*p.latest),
     }
     .run();
+    let probe = probe.map(crate::probe::Probe::finish);
     if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone()) {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
     }
@@ -251,5 +275,5 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         None => None,
     };
     tracing::info!(ticks = stats.ticks, misses = stats.misses, safe_stops = stats.safe_stops, "plant stopped");
-    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup })
+    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, probe })
 }

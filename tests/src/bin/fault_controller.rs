@@ -159,6 +159,7 @@ fn run(a: &Args) -> anyhow::Result<u64> {
             continue;
         };
         let t0 = Instant::now();
+        let woke_mono_ns = messages::monotonic_ns();
         last_state = t0;
         if plant != Some(origin) {
             plant = Some(origin);
@@ -216,9 +217,14 @@ fn run(a: &Args) -> anyhow::Result<u64> {
             controller_id: id,
             tau: tau.into(),
         };
+        // Stage stamps: a --sleep-us delay counts as compute (it sits between waking and the answer).
+        let computed_mono_ns = messages::monotonic_ns();
         let d = ControllerDiagnostics {
             tick: st.tick,
             compute_time_ns: t0.elapsed().as_nanos() as u64,
+            woke_mono_ns,
+            computed_mono_ns,
+            published_mono_ns: messages::monotonic_ns(),
             ..ControllerDiagnostics::zeroed(CONTRACT_VERSION)
         };
         // A stranger publishes torques only, like a process that knows nothing of the contract's
