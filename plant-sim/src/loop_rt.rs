@@ -550,6 +550,7 @@ impl PlantLoop<'_> {
             let plant_ns = pre_ns + (done_ns - recv_ns);
             rec.timing.plant_compute_ns = plant_ns;
             let rel = |t: u64| t as i64 - deadline_ns as i64;
+            let (probe_late_ns, probe_at_ns) = self.probe.map_or((0, 0), |p| p.take());
             let since_start_us = |wall: u64| if wall == 0 { 0.0 } else { (wall as i64 - origin_wall_ns as i64) as f64 * 1e-3 };
             rec.timing.stages = Some(StageStamps {
                 deadline_since_start_ns: deadline_ns.saturating_sub(origin_ns),
@@ -567,7 +568,8 @@ impl PlantLoop<'_> {
                 controller: diag.and_then(|d| ControllerStamps::from_diag(&d, deadline_ns)),
                 late: late_diag.and_then(|d| Some((d.tick, ControllerStamps::from_diag(&d, deadline_ns)?))),
                 probe: self.probe.is_some(),
-                probe_late_ns: self.probe.map_or(0, |p| p.take()),
+                probe_late_ns,
+                probe_stall_from_ns: if probe_late_ns > 0 { rel(probe_at_ns) } else { 0 },
             });
             stats.plant_compute.record(plant_ns);
             if let Some(r) = self.recorder.as_deref_mut() {

@@ -28,15 +28,19 @@ pub const STALL_RING: usize = 1024;
 #[derive(Debug, Default)]
 pub struct Latest {
     late_ns: AtomicU64,
+    /// The deadline (CLOCK_MONOTONIC ns) of that latest wake-up: the stall ran from there.
+    at_ns: AtomicU64,
     /// The plant's first deadline (CLOCK_MONOTONIC ns), 0 until its loop starts.
     grid_ns: AtomicU64,
 }
 
 impl Latest {
-    /// Taken once per tick by the plant (then 0 again).
+    /// Taken once per tick by the plant (then 0 again): how late, and the deadline it was late
+    /// for (a wake-up racing with the take may pair with the previous deadline: one stall late).
     #[inline]
-    pub fn take(&self) -> u64 {
-        self.late_ns.swap(0, Ordering::Relaxed)
+    pub fn take(&self) -> (u64, u64) {
+        let late = self.late_ns.swap(0, Ordering::Relaxed);
+        (late, self.at_ns.load(Ordering::Relaxed))
     }
     /// The plant's loop tells where its grid is.
     pub fn set_grid(&self, first_deadline_ns: u64) {
@@ -119,7 +123,9 @@ fn run(cpu: usize, period_ns: u64, latest: &Latest, stop: &AtomicBool) -> CpuRep
         let woke = rt::now_mono_ns();
         let late = woke.saturating_sub(next);
         latency.record(late);
-        latest.late_ns.fetch_max(late, Ordering::Relaxed);
+        if latest.late_ns.fetch_max(late, Ordering::Relaxed) < late {
+            latest.at_ns.store(next, Ordering::Relaxed);
+        }
         if late >= HOST_STALL_NS {
             ring[(stalls % STALL_RING as u64) as usize] = (next - grid, late);
             stalls += 1;
@@ -163,7 +169,8 @@ mod tests {
         let t0 = rt::now_mono_ns();
         p.latest.set_grid(t0);
         std::thread::sleep(std::time::Duration::from_millis(60));
-        let seen = p.latest.take();
+        let (seen, at) = p.latest.take();
+        assert!(seen == 0 || at > t0, "the stall's deadline {at} is on the probe's grid after {t0}");
         let r = p.finish();
         assert_eq!(r.len(), 1);
         assert_eq!(r[0].cpu, cpus[0]);

@@ -64,48 +64,67 @@ impl Cause {
     }
 }
 
+/// A host stall the probe saw: from the deadline its wake-up was late for, that long; ns
+/// relative to the deadline of the tick being attributed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stall {
+    pub from_ns: i64,
+    pub to_ns: i64,
+}
+
+/// The longest any of `stalls` overlaps [a, b].
+fn overlap(stalls: &[Stall], a: i64, b: i64) -> i64 {
+    stalls.iter().map(|s| (s.to_ns.min(b) - s.from_ns.max(a)).max(0)).max().unwrap_or(0)
+}
+
 /// The cause of one missed tick from its plant stamps `t`, the controller's stamps of that tick
-/// `ctrl` (its own, or a late answer's, relative to this tick's deadline), and `probe_late_ns`,
-/// the latest host-probe wake-up around the tick (0 without the probe). First match wins:
+/// `ctrl` (its own, or a late answer's, relative to this tick's deadline), and the host stalls
+/// the probe reported with this tick and the ones before and after it (none without the probe).
+/// A stall counts where it overlaps the stage in question. First match wins:
 ///
 /// 1. the answer came in time but was refused: [`Cause::Refused`];
 /// 2. the plant skipped periods before the tick or woke so late that its budget was cut at the
-///    next deadline: [`Cause::Host`] if the probe saw a stall (≥ [`HOST_STALL_NS`]), else
-///    [`Cause::PlantLate`];
-/// 3. no controller stamps: [`Cause::Host`] if the probe saw a stall of at least the compute
-///    share, else [`Cause::NoAnswer`];
-/// 4. the controller handed the torque over before the budget's end: [`Cause::Transport`] (the
-///    host's if the probe saw a stall);
+///    next deadline: [`Cause::Host`] if a stall of at least [`HOST_STALL_NS`] overlaps the time
+///    before it woke, else [`Cause::PlantLate`];
+/// 3. no controller stamps: [`Cause::Host`] if a stall overlaps the budget (publish to its end)
+///    by at least the compute share, else [`Cause::NoAnswer`];
+/// 4. the controller handed the torque over before the budget's end: [`Cause::Transport`], the
+///    host's if a stall covers the rest of the budget (or [`HOST_STALL_NS`] of it);
 /// 5. it handed it over after the end: of its wake-up and its compute, the stage furthest over
 ///    its share ([`Cause::ControllerWake`] or [`Cause::ControllerCompute`]); the host's instead
-///    if the probe's stall covers both that excess and the overshoot past the budget's end (had
-///    the host not stalled, the answer would have been in time).
-pub fn cause_of(t: &StageStamps, ctrl: Option<ControllerStamps>, probe_late_ns: u64) -> Cause {
+///    if a stall overlaps that stage by both its excess and the overshoot past the budget's end
+///    (had the host not stalled, the answer would have been in time).
+pub fn cause_of(t: &StageStamps, ctrl: Option<ControllerStamps>, stalls: &[Stall]) -> Cause {
     let budget = t.torque_budget_ns as i64;
-    let stall = probe_late_ns as i64;
-    let seen = probe_late_ns >= HOST_STALL_NS;
+    let host_stall = HOST_STALL_NS as i64;
     if t.answered && t.refused {
         return Cause::Refused;
     }
     // Cut: the budget ends at the next deadline, earlier than a full budget after the publish
     // (which follows the wake-up by a few µs).
     if t.skipped_periods > 0 || t.budget_end_ns - t.plant_woke_ns < budget {
-        return if seen { Cause::Host } else { Cause::PlantLate };
+        return if overlap(stalls, i64::MIN / 2, t.plant_woke_ns) >= host_stall { Cause::Host } else { Cause::PlantLate };
     }
     let wake_share = (WAKE_SHARE * budget as f64) as i64;
     let compute_share = (COMPUTE_SHARE * budget as f64) as i64;
     let Some(c) = ctrl else {
-        return if stall >= compute_share { Cause::Host } else { Cause::NoAnswer };
+        let host = overlap(stalls, t.state_published_ns, t.budget_end_ns) >= compute_share;
+        return if host { Cause::Host } else { Cause::NoAnswer };
     };
     if c.published_ns <= t.budget_end_ns {
-        return if seen { Cause::Host } else { Cause::Transport };
+        let rest = t.budget_end_ns - c.published_ns;
+        let host = overlap(stalls, c.published_ns, t.budget_end_ns + host_stall) >= rest.clamp(1, host_stall);
+        return if host { Cause::Host } else { Cause::Transport };
     }
     let wake_excess = c.woke_ns - t.state_published_ns - wake_share;
     let compute_excess = c.published_ns - c.woke_ns - compute_share;
-    let (cause, excess) =
-        if wake_excess > compute_excess { (Cause::ControllerWake, wake_excess) } else { (Cause::ControllerCompute, compute_excess) };
+    let (cause, excess, stage) = if wake_excess > compute_excess {
+        (Cause::ControllerWake, wake_excess, (t.state_published_ns, c.woke_ns))
+    } else {
+        (Cause::ControllerCompute, compute_excess, (c.woke_ns, c.published_ns))
+    };
     let overshoot = c.published_ns - t.budget_end_ns;
-    if stall >= excess.max(overshoot) {
+    if overlap(stalls, stage.0, stage.1) >= excess.max(overshoot) {
         Cause::Host
     } else {
         cause
@@ -230,8 +249,9 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
             if s.probe && s.probe_late_ns >= HOST_STALL_NS {
                 a.probe_stall_ticks += 1;
             }
-            // The skipped periods before this tick: the host's when the probe saw it stall.
-            let probe_near = s.probe_late_ns.max(rows.get(i + 1).and_then(|n| n.timing.stages).map_or(0, |n| n.probe_late_ns));
+            // The probe's latest wake-up within a tick either side: it reports a stall when it
+            // runs again, which may be before or after the plant's next tick.
+            let probe_near = rows[i.saturating_sub(1)..rows.len().min(i + 2)].iter().filter_map(|n| n.timing.stages).map(|n| n.probe_late_ns).max().unwrap_or(0);
             if s.skipped_periods > 0 {
                 let lost_host = probe_near >= HOST_STALL_NS;
                 for k in 1..=s.skipped_periods as usize {
@@ -242,7 +262,17 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
             }
             if t.missed {
                 let ctrl = s.controller.or_else(|| late_stamps(i));
-                let c = cause_of(&s, ctrl, if s.probe { probe_near } else { 0 });
+                // The stalls reported with this tick and its neighbours, on this tick's time line.
+                let mut stalls = [Stall { from_ns: 0, to_ns: 0 }; 3];
+                let mut n = 0;
+                for r in &rows[i.saturating_sub(1)..rows.len().min(i + 2)] {
+                    if let Some(o) = r.timing.stages.filter(|o| o.probe && o.probe_late_ns > 0) {
+                        let from = o.probe_stall_from_ns + o.deadline_since_start_ns as i64 - s.deadline_since_start_ns as i64;
+                        stalls[n] = Stall { from_ns: from, to_ns: from + o.probe_late_ns as i64 };
+                        n += 1;
+                    }
+                }
+                let c = cause_of(&s, ctrl, &stalls[..n]);
                 host = c == Cause::Host;
                 a.by_cause[Cause::ALL.iter().position(|&x| x == c).unwrap()] += 1;
                 a.missed_ticks.push((r.tick, c));
@@ -367,39 +397,50 @@ mod tests {
         ControllerStamps { woke_ns: woke_us * 1000, computed_ns: published_us * 1000 - 1000, published_ns: published_us * 1000 }
     }
 
-    #[test]
-    fn each_cause_once_from_synthetic_stamps() {
-        // Refused: it came in time, the gate refused it.
-        assert_eq!(cause_of(&StageStamps { refused: true, ..stamps() }, Some(ctrl(20, 40)), 0), Cause::Refused);
-        // The plant published 700 µs late, so its budget was cut at the next deadline; the probe
-        // saw a 690 µs stall: the host. Without the probe's stall: the plant's own.
-        let late_plant = StageStamps { plant_woke_ns: 695_000, state_published_ns: 700_000, budget_end_ns: 1_000_000, ..missed() };
-        assert_eq!(cause_of(&late_plant, None, 690_000), Cause::Host);
-        assert_eq!(cause_of(&late_plant, None, 0), Cause::PlantLate);
-        // Skipped periods before the tick, probe saw 3 ms: host.
-        assert_eq!(cause_of(&StageStamps { skipped_periods: 3, ..missed() }, None, 3_000_000), Cause::Host);
-        // Controller woke 450 µs after the publish, computed 20 µs: over its wake share (100 µs).
-        assert_eq!(cause_of(&missed(), Some(ctrl(460, 530)), 0), Cause::ControllerWake);
-        // Woke 10 µs after the publish, computed 700 µs (share 350 µs).
-        assert_eq!(cause_of(&missed(), Some(ctrl(20, 720)), 0), Cause::ControllerCompute);
-        // Handed over at 480 µs (budget end 510 µs), not received by then: transport.
-        assert_eq!(cause_of(&missed(), Some(ctrl(20, 480)), 0), Cause::Transport);
-        // No answer, no stamps.
-        assert_eq!(cause_of(&missed(), None, 0), Cause::NoAnswer);
+    /// A stall from `from_us` for `len_us` after the deadline.
+    fn stall(from_us: i64, len_us: i64) -> Vec<Stall> {
+        vec![Stall { from_ns: from_us * 1000, to_ns: (from_us + len_us) * 1000 }]
     }
 
     #[test]
-    fn the_host_takes_a_controller_miss_only_when_its_stall_explains_it() {
-        // Compute 700 µs: 350 µs over its share, 210 µs past the budget's end.
+    fn each_cause_once_from_synthetic_stamps() {
+        // Refused: it came in time, the gate refused it.
+        assert_eq!(cause_of(&StageStamps { refused: true, ..stamps() }, Some(ctrl(20, 40)), &[]), Cause::Refused);
+        // The plant woke 695 µs late, so its budget was cut at the next deadline; the probe was
+        // stalled for 690 µs from its deadline 0.5 ms before ours: the host. Without: the plant's own.
+        let late_plant = StageStamps { plant_woke_ns: 695_000, state_published_ns: 700_000, budget_end_ns: 1_000_000, ..missed() };
+        assert_eq!(cause_of(&late_plant, None, &stall(-500, 1190)), Cause::Host);
+        assert_eq!(cause_of(&late_plant, None, &[]), Cause::PlantLate);
+        // Skipped periods before the tick, the probe stalled 3 ms just before: host.
+        assert_eq!(cause_of(&StageStamps { skipped_periods: 3, ..missed() }, None, &stall(-3500, 3000)), Cause::Host);
+        // Controller woke 450 µs after the publish, computed 20 µs: over its wake share (100 µs).
+        assert_eq!(cause_of(&missed(), Some(ctrl(460, 530)), &[]), Cause::ControllerWake);
+        // Woke 10 µs after the publish, computed 700 µs (share 350 µs).
+        assert_eq!(cause_of(&missed(), Some(ctrl(20, 720)), &[]), Cause::ControllerCompute);
+        // Handed over at 480 µs (budget end 510 µs), not received by then: transport.
+        assert_eq!(cause_of(&missed(), Some(ctrl(20, 480)), &[]), Cause::Transport);
+        // No answer, no stamps.
+        assert_eq!(cause_of(&missed(), None, &[]), Cause::NoAnswer);
+    }
+
+    #[test]
+    fn the_host_takes_a_miss_only_when_its_stall_overlaps_the_stage_enough() {
+        // Compute from 20 to 720 µs: 350 µs over its share, 210 µs past the budget's end.
         let c = Some(ctrl(20, 720));
-        assert_eq!(cause_of(&missed(), c, 300_000), Cause::ControllerCompute, "a 300 µs stall does not cover a 350 µs excess");
-        assert_eq!(cause_of(&missed(), c, 360_000), Cause::Host);
-        // A probe below the stall threshold never makes a transport miss the host's.
-        assert_eq!(cause_of(&missed(), Some(ctrl(20, 480)), HOST_STALL_NS - 1), Cause::Transport);
-        assert_eq!(cause_of(&missed(), Some(ctrl(20, 480)), HOST_STALL_NS), Cause::Host);
-        // No stamps: only a stall of the compute share (350 µs) explains a missing answer.
-        assert_eq!(cause_of(&missed(), None, 349_000), Cause::NoAnswer);
-        assert_eq!(cause_of(&missed(), None, 350_000), Cause::Host);
+        assert_eq!(cause_of(&missed(), c, &stall(100, 300)), Cause::ControllerCompute, "300 µs do not cover a 350 µs excess");
+        assert_eq!(cause_of(&missed(), c, &stall(100, 360)), Cause::Host);
+        // The same stall, but outside the compute (before the deadline, or after the answer).
+        assert_eq!(cause_of(&missed(), c, &stall(-900, 360)), Cause::ControllerCompute);
+        assert_eq!(cause_of(&missed(), c, &stall(730, 5000)), Cause::ControllerCompute);
+        // A plant that woke late while a stall of under 100 µs ran is late by itself.
+        let late_plant = StageStamps { plant_woke_ns: 695_000, state_published_ns: 700_000, budget_end_ns: 1_000_000, ..missed() };
+        assert_eq!(cause_of(&late_plant, None, &stall(0, 99)), Cause::PlantLate);
+        // Transport: handed over 30 µs before the end; a stall over those 30 µs is the host's.
+        assert_eq!(cause_of(&missed(), Some(ctrl(20, 480)), &stall(470, 20)), Cause::Transport);
+        assert_eq!(cause_of(&missed(), Some(ctrl(20, 480)), &stall(470, 45)), Cause::Host);
+        // No stamps: only a stall over the compute share (350 µs) of the budget explains it.
+        assert_eq!(cause_of(&missed(), None, &stall(20, 349)), Cause::NoAnswer);
+        assert_eq!(cause_of(&missed(), None, &stall(20, 350)), Cause::Host);
     }
 
     fn row(tick: u64, s: StageStamps, missed: bool) -> TimingRow {
@@ -431,7 +472,8 @@ mod tests {
             }
             if k == 600 {
                 deadline_shift = 50;
-                s = StageStamps { skipped_periods: 50, probe_late_ns: 50_300_000, ..missed() };
+                // The probe was late by 50.3 ms for its deadline 50.5 ms before this one.
+                s = StageStamps { skipped_periods: 50, probe_late_ns: 50_300_000, probe_stall_from_ns: -50_500_000, ..missed() };
                 m = true;
             }
             if k == 800 {

@@ -133,6 +133,8 @@ pub struct StageStamps {
     /// those it finished between the previous tick's end and this one's.
     pub probe: bool,
     pub probe_late_ns: u64,
+    /// The deadline that wake-up was late for: the stall ran from here for `probe_late_ns`.
+    pub probe_stall_from_ns: i64,
 }
 
 /// The controller's stage stamps of one tick, ns after a deadline ([`StageStamps`]).

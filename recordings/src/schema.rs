@@ -156,6 +156,7 @@ int64 late_controller_computed_ns
 int64 late_torque_published_ns
 bool probe                      # the host-floor probe ran (rig timing)
 uint64 probe_late_ns            # ns, latest probe wake-up finished since the previous tick
+int64 probe_stall_from_ns       # the deadline it was late for: the stall ran from here
 ================================================================================
 MSG: builtin_interfaces/Time
 int32 sec
@@ -355,6 +356,7 @@ pub fn encode_timing(buf: &mut Vec<u8>, r: &TickHead, recorder_dropped: u64) {
     w.i64(l.published_ns);
     w.bool(g.probe);
     w.u64(g.probe_late_ns);
+    w.i64(g.probe_stall_from_ns);
 }
 
 pub fn encode_event(buf: &mut Vec<u8>, e: &EventRecord) {
@@ -555,6 +557,7 @@ fn decode_stages(r: &mut CdrReader) -> Result<StageStamps, CdrError> {
     g.late = late.then_some((late_tick, l));
     g.probe = r.bool("probe")?;
     g.probe_late_ns = r.u64("probe_late_ns")?;
+    g.probe_stall_from_ns = r.i64("probe_stall_from_ns")?;
     Ok(g)
 }
 
@@ -659,6 +662,7 @@ mod tests {
                 late: Some((39, ControllerStamps { woke_ns: -1_900_000, computed_ns: -1_100_000, published_ns: -1_099_000 })),
                 probe: true,
                 probe_late_ns: 250_000,
+                probe_stall_from_ns: -400_000,
             }),
         };
         r
@@ -741,7 +745,8 @@ mod tests {
                 "torque_receive_since_start_us", "skipped_periods", "plant_woke_ns", "state_published_ns", "budget_end_ns",
                 "torque_budget_ns", "torque_received_ns", "plant_done_ns", "answered", "refused", "controller_stamped",
                 "controller_woke_ns", "controller_computed_ns", "torque_published_ns", "late_stamped", "late_tick",
-                "late_controller_woke_ns", "late_controller_computed_ns", "late_torque_published_ns", "probe", "probe_late_ns"
+                "late_controller_woke_ns", "late_controller_computed_ns", "late_torque_published_ns", "probe", "probe_late_ns",
+                "probe_stall_from_ns"
             ]
         );
         for k in EventKind::ALL {
