@@ -424,6 +424,7 @@ impl PlantLoop<'_> {
             // The budget counts from the publish (a plant that woke late must not blame the
             // controller), but never past the next tick's deadline.
             let mut budget_end_ns = (publish_ns + p.budget_ns).min(deadline_ns + p.period_ns);
+            let budget_ns = if paced { p.budget_ns } else { p.watchdog_ns };
             if paced {
                 self.wait_for_answers(tick, at(budget_end_ns), &mut answers);
             } else if self.gate.status() == PlantStatus::WaitingForController {
@@ -560,7 +561,7 @@ impl PlantLoop<'_> {
                 plant_woke_ns: rel(wake_ns),
                 state_published_ns: rel(published_ns),
                 budget_end_ns: rel(budget_end_ns),
-                torque_budget_ns: if paced { p.budget_ns } else { p.watchdog_ns },
+                torque_budget_ns: budget_ns,
                 torque_received_ns: rel(recv_ns),
                 plant_done_ns: rel(done_ns),
                 answered: torque.is_some(),
