@@ -109,7 +109,8 @@ pub struct StageStamps {
     pub skipped_periods: u32,
     /// The plant woke from its deadline sleep.
     pub plant_woke_ns: i64,
-    /// The plant's state and wrench were published (the controller notified).
+    /// The plant's state and wrench were published (taken after the publish call; the controller,
+    /// notified inside it, may wake before this stamp).
     pub state_published_ns: i64,
     /// The end of the torque budget: the plant waits for the answer until then.
     pub budget_end_ns: i64,

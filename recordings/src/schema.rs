@@ -133,6 +133,7 @@ uint64 controller_compute_ns    # ns, from the diagnostics (0 if none)
 uint64 recorder_dropped         # records the recorder dropped so far (must stay 0)
 # Stage stamps (README, Timing): CLOCK_MONOTONIC ns after this tick's deadline (negative =
 # before it). Recordings made before them end at recorder_dropped.
+bool stamped                    # false: a writer without stamps, the fields below are zero
 uint64 deadline_since_start_ns  # ns, this tick's deadline after the run's first one
 float64 publish_since_start_us  # us, publish_wall_ns after the run's start (plots without rounding)
 float64 torque_receive_since_start_us  # us, torque_receive_wall_ns after the start, 0 if none
@@ -331,6 +332,7 @@ pub fn encode_timing(buf: &mut Vec<u8>, r: &TickHead, recorder_dropped: u64) {
     w.u64(t.controller_compute_ns);
     w.u64(recorder_dropped);
     let g = t.stages.unwrap_or_default();
+    w.bool(t.stages.is_some());
     w.u64(g.deadline_since_start_ns);
     w.f64(g.publish_since_start_us);
     w.f64(g.torque_receive_since_start_us);
@@ -519,7 +521,9 @@ pub fn decode_timing(msg: &[u8]) -> Result<TimingRow, CdrError> {
     let recorder_dropped = r.u64("recorder_dropped")?;
     let mut timing = timing;
     if !r.at_end() {
-        timing.stages = Some(decode_stages(&mut r)?);
+        let stamped = r.bool("stamped")?;
+        let stages = decode_stages(&mut r)?;
+        timing.stages = stamped.then_some(stages);
     }
     Ok(TimingRow { tick, timing, recorder_dropped })
 }
@@ -741,7 +745,7 @@ mod tests {
             fields(TIMING.schema_text),
             [
                 "tick", "publish_stamp", "publish_wall_ns", "torque_receive_wall_ns", "round_trip_ns", "period_ns", "missed",
-                "plant_compute_ns", "controller_compute_ns", "recorder_dropped", "deadline_since_start_ns", "publish_since_start_us",
+                "plant_compute_ns", "controller_compute_ns", "recorder_dropped", "stamped", "deadline_since_start_ns", "publish_since_start_us",
                 "torque_receive_since_start_us", "skipped_periods", "plant_woke_ns", "state_published_ns", "budget_end_ns",
                 "torque_budget_ns", "torque_received_ns", "plant_done_ns", "answered", "refused", "controller_stamped",
                 "controller_woke_ns", "controller_computed_ns", "torque_published_ns", "late_stamped", "late_tick",

@@ -1,7 +1,7 @@
 //! A hard write error in the middle of a run (here EFBIG from a file-size limit; disk_full.rs has
 //! a real ENOSPC): the writer stops with a clear reason, keeps draining so the loop never blocks,
-//! and cuts the file back to its last complete chunk. A size limit leaves no room for the footer
-//! (unlike ENOSPC, where disk_full.rs shows the file ended cleanly), so the file ends there and
+//! and cuts the file back to its last complete chunk. A size limit 100 bytes past a chunk
+//! boundary leaves no room for the footer (unlike ENOSPC, where disk_full.rs shows the file ended cleanly), so the file ends there and
 //! reads as cut, exactly at the chunk boundary. Own test binary: the limit applies to the process.
 
 use recordings::read::{Integrity, Recording};
@@ -13,18 +13,39 @@ fn a_write_error_mid_run_stops_the_recording_and_keeps_the_complete_chunks() {
     let dir = std::env::temp_dir().join(format!("recordings-werr-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("limited.mcap");
-    let limit: u64 = 400 << 10;
+    let run = SyntheticRun { ticks: 4000, ..Default::default() };
+    let record = |path: &std::path::Path| {
+        let mut cfg = RecorderConfig::new(path);
+        cfg.chunk_size_bytes = 64 << 10;
+        cfg.metadata = run.metadata();
+        Recorder::start(cfg).unwrap()
+    };
+    // The limit: 100 bytes past a chunk boundary near 400 KiB, so that the chunk after it fails
+    // and the finale (event, summary, footer: more than 100 bytes) has no room either, whatever
+    // the messages' sizes. The boundaries come from the same run written without a limit first.
+    let limit: u64 = {
+        let free = dir.join("unlimited.mcap");
+        let mut r = record(&free);
+        for k in 0..run.ticks {
+            while r.queue_free() == 0 {
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            r.record_tick(&run.tick(k));
+        }
+        assert!(r.finish().unwrap().finalised);
+        let bytes = std::fs::read(&free).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+        let start = summary.chunk_indexes.iter().map(|c| c.chunk_start_offset).find(|&o| o >= 380 << 10).expect("a chunk past 380 KiB");
+        assert!(summary.chunk_indexes.last().unwrap().chunk_start_offset > start, "chunks after the limit");
+        start + 100
+    };
     // SAFETY: plain syscalls; SIGXFSZ ignored so the write returns EFBIG instead of killing us.
     unsafe {
         libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
         let lim = libc::rlimit { rlim_cur: limit, rlim_max: libc::RLIM_INFINITY };
         assert_eq!(libc::setrlimit(libc::RLIMIT_FSIZE, &lim), 0);
     }
-    let run = SyntheticRun { ticks: 4000, ..Default::default() };
-    let mut cfg = RecorderConfig::new(&path);
-    cfg.chunk_size_bytes = 64 << 10;
-    cfg.metadata = run.metadata();
-    let mut rec = Recorder::start(cfg).unwrap();
+    let mut rec = record(&path);
     let mut accepted = 0u64;
     for k in 0..run.ticks {
         while rec.queue_free() == 0 {
