@@ -70,14 +70,27 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
     // Left out too: a tick whose state the plant itself published late (it skipped periods or
     // its budget was cut at the next deadline; the plant's stamps say so), as happens on this
     // shared host; there the host came first, and the test did not make that.
+    // So is a tick the controller woke for later than its wake share after the publish (the
+    // stamps say so): a wake-up held up by the host or another rig's real-time threads on this
+    // machine is a cause of its own, and the test only delayed the compute.
     let plant_late = |k: u64| {
-        rec.timing.iter().find(|t| t.tick == k).and_then(|t| t.timing.stages).is_some_and(|s| {
-            s.skipped_periods > 0 || s.budget_end_ns - s.plant_woke_ns < s.torque_budget_ns as i64
+        let s = rec.timing.iter().find(|t| t.tick == k).and_then(|t| t.timing.stages);
+        let own = s.and_then(|s| s.controller);
+        let late = rec.timing.iter().find_map(|t| t.timing.stages.and_then(|s| s.late).filter(|l| l.0 == k).map(|l| (t.timing.stages.unwrap(), l.1)));
+        let woke_after_publish = match (s, own, late) {
+            (Some(s), Some(c), _) => c.woke_ns - s.state_published_ns,
+            (Some(s), None, Some((at, c))) => c.woke_ns + (at.deadline_since_start_ns as i64 - s.deadline_since_start_ns as i64) - s.state_published_ns,
+            _ => 0,
+        };
+        s.is_some_and(|s| {
+            s.skipped_periods > 0
+                || s.budget_end_ns - s.plant_woke_ns < s.torque_budget_ns as i64
+                || woke_after_publish > (recordings::attribution::WAKE_SHARE * s.torque_budget_ns as f64) as i64
         })
     };
     let every_100th: Vec<u64> = (first + 1..=last).filter(|&k| k % 100 == 0).collect();
     let delayed: Vec<u64> = every_100th.iter().copied().filter(|&k| stamped(k) && !plant_late(k)).collect();
-    eprintln!("{} of {} 100th ticks delayed (the rest unseen by the controller or published late)", delayed.len(), every_100th.len());
+    eprintln!("{} of {} 100th ticks delayed (the rest unseen by the controller, published late or woken for late)", delayed.len(), every_100th.len());
     assert!(delayed.len() >= 40, "{} delayed ticks from tick {first} to {last}", delayed.len());
     let mut wrong = Vec::new();
     for &k in &delayed {
