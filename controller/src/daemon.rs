@@ -172,6 +172,7 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         };
         let wake = wait_for_state(&ports, next_due.map(|due| (due, cfg.state_spin)), deadline);
         let woke = Instant::now();
+        let woke_mono_ns = messages::monotonic_ns();
         let received = if wake == Wake::Timeout {
             // A notification may have been consumed while we computed: one last look.
             match ports.receive_state_with_origin() {
@@ -300,8 +301,10 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         law.set_integrating(running && state.flags & state_flags::IN_CONTACT != 0);
         let (tau, diag) = step(&mut law, &mut reference, &state, &wrench, &q, &qd, cfg.contract_version);
         let mut diag = diag;
+        diag.computed_mono_ns = messages::monotonic_ns();
         let compute_ns = woke.elapsed().as_nanos() as u64;
         diag.compute_time_ns = compute_ns;
+        diag.woke_mono_ns = woke_mono_ns;
         let torque = JointTorque {
             contract_version: cfg.contract_version,
             // A reflex latched the plant's safe stop: acknowledge it (starting) with the
@@ -317,6 +320,8 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
             controller_id: id,
             tau: tau.into(),
         };
+        // The stage stamps (messages README, ControllerDiagnostics): handed over now.
+        diag.published_mono_ns = messages::monotonic_ns();
         ports.publish(&torque, Some(&diag)).with_context(|| format!("rig {:?}: publish torque of tick {}", cfg.rig, state.tick))?;
         last_tick = Some(state.tick);
         summary.ticks_answered += 1;
@@ -406,6 +411,9 @@ pub fn step(
         rot_err_task_rad: out.rot_err_task_rad.into(),
         force_integral_ns: out.force_integral_ns,
         compute_time_ns: 0,
+        woke_mono_ns: 0,
+        computed_mono_ns: 0,
+        published_mono_ns: 0,
     };
     (out.tau, diag)
 }

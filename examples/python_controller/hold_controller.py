@@ -18,7 +18,7 @@ import iceoryx2 as iox2
 import numpy as np
 import pinocchio as pin
 
-CONTRACT_VERSION = 1
+CONTRACT_VERSION = 2
 SHUTTING_DOWN = 4                        # PlantStatus::ShuttingDown
 OMEGA, ZETA = 2 * np.pi * 10.0, 1.0      # closed-loop natural frequency (rad/s) and damping ratio
 DEAD_PLANT_S = 0.1                       # silence after the first state that means "plant is dead"
@@ -51,11 +51,14 @@ class ControllerDiagnostics(ctypes.Structure):
     _fields_ = [("contract_version", u32), ("force_control_active", u32), ("tick", u64),
                 ("force_ref_n", f64), ("force_meas_n", f64), ("pos_ref_task_m", D3),
                 ("pos_err_task_m", D3), ("rot_err_task_rad", D3), ("force_integral_ns", f64),
-                ("compute_time_ns", u64)]
+                ("compute_time_ns", u64),
+                # Stage stamps, CLOCK_MONOTONIC ns (time.monotonic_ns() on Linux): woke, computed,
+                # handed over. The plant turns them into /timing's offsets and attributes misses.
+                ("woke_mono_ns", u64), ("computed_mono_ns", u64), ("published_mono_ns", u64)]
     @staticmethod
     def type_name(): return "rig::ControllerDiagnostics"
 
-for t, size in ((JointState, 192), (Wrench, 64), (JointTorque, 72), (ControllerDiagnostics, 120)):
+for t, size in ((JointState, 192), (Wrench, 64), (JointTorque, 72), (ControllerDiagnostics, 144)):
     assert ctypes.sizeof(t) == size and ctypes.alignment(t) == 8, t
 
 
@@ -139,7 +142,7 @@ def open_ports(rig):
     p["state"] = pubsub("joint_state", JointState).subscriber_builder().buffer_size(4).create()
     p["wrench"] = pubsub("wrench", Wrench).subscriber_builder().buffer_size(4).create()
     p["torque"] = pubsub("joint_torque", JointTorque).publisher_builder().create()
-    p["diag"] = pubsub("controller_diagnostics", ControllerDiagnostics).publisher_builder().create()
+    p["diag"] = pubsub("controller_diagnostics_v2", ControllerDiagnostics).publisher_builder().create()
     p["state_ready"] = event("state_ready").listener_builder().create()
     p["torque_ready"] = event("torque_ready").notifier_builder().create()
     return p
@@ -183,7 +186,7 @@ def main():
                 sys.exit(f"hold_controller.py: error: plant on rig {a.rig!r} is silent for "
                          f"{DEAD_PLANT_S * 1e3:.0f} ms: assuming it is dead")
             continue
-        t0 = time.perf_counter_ns()
+        t0, woke = time.perf_counter_ns(), time.monotonic_ns()
         last_state = time.monotonic()
         check_version(st, "joint state")
         if st.plant_status == SHUTTING_DOWN:
@@ -197,8 +200,10 @@ def main():
         qdd_ref = OMEGA**2 * (q_hold - q) - 2 * ZETA * OMEGA * qd
         tau = pin.rnea(model, data, q, qd, qdd_ref) + armature * qdd_ref + viscous * qd
         torque = JointTorque(CONTRACT_VERSION, 0, st.tick, controller_id, D6(*tau))  # status 0 = active
+        computed = time.monotonic_ns()
         diag = ControllerDiagnostics(contract_version=CONTRACT_VERSION, tick=st.tick,
-                                     compute_time_ns=time.perf_counter_ns() - t0)
+                                     compute_time_ns=time.perf_counter_ns() - t0, woke_mono_ns=woke,
+                                     computed_mono_ns=computed, published_mono_ns=time.monotonic_ns())
         # Diagnostics first: a plant that polls for the torque then finds them too.
         ports["diag"].send_copy(diag)
         ports["torque"].send_copy(torque)

@@ -274,6 +274,7 @@ fn prepare(
         controller_cpu: lockstep.then(plant_sim::rt::lockstep_cpu),
         quiet: false,
         live,
+        host_probe: false,
     })
 }
 
@@ -299,6 +300,14 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
                 let cpus = std::thread::available_parallelism().map_or(0, |n| n.get());
                 println!("host: {cpus} CPUs, load average (1/5/15 min) {}", load.split_whitespace().take(3).collect::<Vec<_>>().join(" "));
                 print!("{}", summary::timing_report(v));
+                // Whose fault each miss is, from the recording's stage stamps (the one attribution
+                // `rig report` uses too).
+                if let Some(path) = v.get("recording").and_then(serde_json::Value::as_str) {
+                    match recordings::read::Recording::open(Path::new(path)) {
+                        Ok(rec) => print!("{}", recordings::attribution::format_table(&recordings::attribution::attribute(&rec.timing))),
+                        Err(e) => eprintln!("rig: could not read back {path} for the miss attribution: {e:#}"),
+                    }
+                }
             }
             print!("{}", summary::run_summary(v));
             let path = v.get("recording").and_then(serde_json::Value::as_str).filter(|_| !timing);
@@ -471,7 +480,8 @@ fn main() {
                 }
             };
             let live = a.live.config();
-            let l = prepare(rig, scenario, Some("realtime".into()), ("--seconds", Some(a.seconds)), Some(dir), a.controller, live)?;
+            let mut l = prepare(rig, scenario, Some("realtime".into()), ("--seconds", Some(a.seconds)), Some(dir), a.controller, live)?;
+            l.host_probe = true;
             launch_and_report(&l, true, a.json.as_deref())
         })(),
         Cmd::Sweep(a) => run_sweep(a),

@@ -172,6 +172,9 @@ pub fn timing_report(v: &Value) -> String {
             s += &dist_line(name, d);
         }
     }
+    if let Some(probe) = v.get("host_probe").filter(|p| !p.is_null()) {
+        s += &host_probe_lines(probe);
+    }
     for (key, name) in [("round_trip", "round-trip latency"), ("jitter", "tick-period jitter")] {
         if let Some(d) = v.get(key) {
             s += &format!("{name} histogram (bar length ~ log count):\n");
@@ -179,6 +182,36 @@ pub fn timing_report(v: &Value) -> String {
         }
     }
     s
+}
+
+/// The host-floor probe's wake-up latency per CPU, next to the rig's distributions, its stall
+/// count and the latest stalls with their times.
+fn host_probe_lines(p: &Value) -> String {
+    let mut s = String::new();
+    let threshold = num(p, "stall_threshold_us");
+    for c in p.get("cpus").and_then(Value::as_array).into_iter().flatten() {
+        let cpu = int(c, "cpu");
+        if let Some(d) = c.get("latency") {
+            s += &dist_line(&format!("host probe CPU {cpu}"), d);
+        }
+        let fifo = c.get("sched_fifo").and_then(Value::as_bool).unwrap_or(false);
+        let stalls: Vec<String> = c
+            .get("recent_stalls")
+            .and_then(Value::as_array)
+            .map(|a| a.iter().rev().take(5).map(|x| format!("{:.1} us at {:.1} ms", num_at(x, 1), num_at(x, 0))).collect())
+            .unwrap_or_default();
+        s += &format!(
+            "  CPU {cpu}: {} stalls (wake-up >= {threshold:.0} us){}{}\n",
+            int(c, "stalls"),
+            if stalls.is_empty() { String::new() } else { format!(", latest: {}", stalls.join(", ")) },
+            if fifo { "" } else { "; SCHED_FIFO refused: the probe measured the normal scheduler" }
+        );
+    }
+    s
+}
+
+fn num_at(v: &Value, i: usize) -> f64 {
+    v.get(i).and_then(Value::as_f64).unwrap_or(f64::NAN)
 }
 
 #[cfg(test)]
@@ -252,6 +285,18 @@ mod tests {
         assert_eq!(out(Ending::ControllerFailed("x".into()), None), 3);
         assert_eq!(out(Ending::Interrupted, None), 130);
         assert_eq!(out(Ending::Terminated, None), 143);
+    }
+
+    #[test]
+    fn the_timing_report_shows_each_probe_cpu_and_its_stalls() {
+        let lat = serde_json::json!({"count": 60000, "p50_us": 3.1, "p90_us": 4.0, "p99_us": 9.5, "p999_us": 40.0, "max_us": 2100.0});
+        let v = serde_json::json!({"ticks": 60000, "misses": 2, "host_probe": {"stall_threshold_us": 100.0, "cpus": [
+            {"cpu": 0, "sched_fifo": true, "latency": lat, "stalls": 3, "recent_stalls": [[1000.5, 150.0], [2000.5, 2100.0]]},
+            {"cpu": 1, "sched_fifo": false, "latency": lat, "stalls": 0, "recent_stalls": []}]}});
+        let s = timing_report(&v);
+        assert!(s.contains("host probe CPU 0") && s.contains("host probe CPU 1"), "{s}");
+        assert!(s.contains("CPU 0: 3 stalls (wake-up >= 100 us), latest: 2100.0 us at 2000.5 ms, 150.0 us at 1000.5 ms\n"), "{s}");
+        assert!(s.contains("CPU 1: 0 stalls (wake-up >= 100 us); SCHED_FIFO refused"), "{s}");
     }
 
     #[test]

@@ -27,6 +27,8 @@ pub struct RigLaunch {
     pub quiet: bool,
     /// The plant serves its recording live (`--live ADDR --live-rate HZ`).
     pub live: Option<recordings::LiveConfig>,
+    /// The plant runs the host-floor probe (`plant-sim --host-probe`): for `rig timing`.
+    pub host_probe: bool,
 }
 
 /// How a supervised run ended.
@@ -251,6 +253,9 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     }
     if let Some(live) = &l.live {
         plant_cmd.arg("--live").arg(live.addr.to_string()).arg("--live-rate").arg(live.rate_hz.to_string());
+    }
+    if l.host_probe {
+        plant_cmd.arg("--host-probe");
     }
     let mut plant = spawn(&mut plant_cmd, "plant", &l.plant_bin)?;
     let mut plant_out = plant.stdout.take().context("plant stdout")?;

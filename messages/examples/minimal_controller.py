@@ -15,7 +15,7 @@ or silent. Needs Python >= 3.11 and `pip install iceoryx2==0.10.0`.
 import argparse, ctypes, math, os, sys, time, tomllib
 import iceoryx2 as iox2
 
-CONTRACT_VERSION, SHUTTING_DOWN = 1, 4
+CONTRACT_VERSION, SHUTTING_DOWN = 2, 4
 # Critically damped 10 Hz per joint on M_ii of the rig's start pose (kg m^2, 1 kg tool, rounded).
 OMEGA, INERTIA = 2 * math.pi * 10.0, [25.0, 47.0, 9.5, 0.057, 0.022, 0.0005]
 KP = [m * OMEGA**2 for m in INERTIA]  # N m/rad

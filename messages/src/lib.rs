@@ -21,7 +21,19 @@ pub mod services;
 use iceoryx2::prelude::*;
 
 /// Version of this contract. Bump on any change of layout or meaning.
-pub const CONTRACT_VERSION: u32 = 1;
+/// 2: [`ControllerDiagnostics`] carries the controller's stage stamps (woke, computed, published),
+/// on the service `controller_diagnostics_v2`.
+pub const CONTRACT_VERSION: u32 = 2;
+
+/// CLOCK_MONOTONIC now, ns: the clock of every stage stamp of the contract (the plant's and the
+/// controller's, one clock on one host). A vDSO call, no syscall (about 20-30 ns).
+#[inline]
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: valid pointer to a timespec.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
 
 /// Number of robot joints.
 pub const DOF: usize = 6;
@@ -230,6 +242,13 @@ pub struct ControllerDiagnostics {
     pub force_integral_ns: f64,
     /// Controller compute time for this tick (wake to publish), ns.
     pub compute_time_ns: u64,
+    /// Stage stamps of this tick, CLOCK_MONOTONIC ns ([`monotonic_ns`]; 0 = not stamped): the
+    /// controller woke for this tick's state, finished computing its torque, handed the torque
+    /// to iceoryx2 (taken just before this record and the torque are sent). The plant turns them
+    /// into offsets from the tick's deadline on `/timing` and attributes misses with them.
+    pub woke_mono_ns: u64,
+    pub computed_mono_ns: u64,
+    pub published_mono_ns: u64,
 }
 
 impl ControllerDiagnostics {
@@ -247,6 +266,9 @@ impl ControllerDiagnostics {
             rot_err_task_rad: [0.0; 3],
             force_integral_ns: 0.0,
             compute_time_ns: 0,
+            woke_mono_ns: 0,
+            computed_mono_ns: 0,
+            published_mono_ns: 0,
         }
     }
 }
@@ -295,9 +317,12 @@ const _: () = {
     assert!(offset_of!(Wrench, force) == 16);
     assert!(size_of::<JointTorque>() == 72);
     assert!(offset_of!(JointTorque, tau) == 24);
-    assert!(size_of::<ControllerDiagnostics>() == 120);
+    assert!(size_of::<ControllerDiagnostics>() == 144);
     assert!(offset_of!(ControllerDiagnostics, force_ref_n) == 16);
     assert!(offset_of!(ControllerDiagnostics, compute_time_ns) == 112);
+    assert!(offset_of!(ControllerDiagnostics, woke_mono_ns) == 120);
+    assert!(offset_of!(ControllerDiagnostics, computed_mono_ns) == 128);
+    assert!(offset_of!(ControllerDiagnostics, published_mono_ns) == 136);
 };
 
 #[cfg(test)]

@@ -353,15 +353,21 @@ impl PlantPorts {
         }
     }
 
-    /// Newest controller diagnostics of tick `tick` from publisher `origin` (0 = any publisher).
-    pub fn receive_diagnostics_from(&self, origin: u128, tick: u64) -> Option<ControllerDiagnostics> {
-        let mut last = None;
+    /// Newest controller diagnostics of tick `tick` from publisher `origin` (0 = any publisher),
+    /// and the newest of an earlier tick (a late answer's, whose stage stamps tell why it was
+    /// late). Allocation-free.
+    pub fn receive_diagnostics_from(&self, origin: u128, tick: u64) -> (Option<ControllerDiagnostics>, Option<ControllerDiagnostics>) {
+        let (mut now, mut late) = (None, None);
         while let Ok(Some(s)) = self.diag_sub.receive() {
-            if s.tick == tick && (origin == 0 || s.origin().value() == origin) {
-                last = Some(*s);
+            if origin == 0 || s.origin().value() == origin {
+                if s.tick == tick {
+                    now = Some(*s);
+                } else if s.tick < tick {
+                    late = Some(*s);
+                }
             }
         }
-        last
+        (now, late)
     }
 
     /// Newest torque of any tick (late answers included): for diagnostics and version checks.

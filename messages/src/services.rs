@@ -8,7 +8,11 @@ pub const WRENCH: &str = "wrench";
 /// Publish-subscribe: [`crate::JointTorque`], controller → plant.
 pub const JOINT_TORQUE: &str = "joint_torque";
 /// Publish-subscribe: [`crate::ControllerDiagnostics`], controller → plant (optional for a controller).
-pub const CONTROLLER_DIAGNOSTICS: &str = "controller_diagnostics";
+/// Named after its layout's contract version: iceoryx2 refuses to open a service whose payload
+/// size differs, so a controller built against version 1 (120-byte diagnostics on
+/// `controller_diagnostics`) opens a service of its own, starts, and is refused by contract
+/// version, both versions named, instead of failing inside iceoryx2.
+pub const CONTROLLER_DIAGNOSTICS: &str = "controller_diagnostics_v2";
 /// Event: the plant notifies after publishing state and wrench of a tick.
 pub const STATE_READY: &str = "state_ready";
 /// Event: the controller notifies after publishing the torque of a tick.

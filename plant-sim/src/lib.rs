@@ -11,6 +11,7 @@ pub mod launcher;
 pub mod limits;
 pub mod loop_rt;
 pub mod physics;
+pub mod probe;
 pub mod rt;
 pub mod run;
 

@@ -31,7 +31,7 @@ use messages::liveness::PeerWatch;
 use messages::ports::Answers;
 use crate::histogram::Histogram;
 use crate::physics::Physics;
-use crate::recording::{EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
+use crate::recording::{ControllerStamps, EventKind, EventRecord, Recorder, StageStamps, StripRecord, TickRecord, TimingRecord};
 use crate::rt;
 
 /// Loop parameters.
@@ -121,6 +121,8 @@ pub struct PlantLoop<'a> {
     /// Liveness of the active controller's node (None: no watcher, death only by silence).
     pub watch: Option<&'a PeerWatch>,
     pub reflex_limits: ReflexLimits,
+    /// The host-floor probe's latest wake-up, read once per tick (None: no probe).
+    pub probe: Option<&'a crate::probe::Latest>,
 }
 
 /// Longest single sleep while waiting for a torque (see `wait_for_answers`).
@@ -365,9 +367,12 @@ impl PlantLoop<'_> {
         let mut last_overrun_log: Option<(u64, u64)> = None;
         let ticks_per_s = 1_000_000_000 / p.period_ns.max(1);
         // One reference instant for both clocks: Instant is CLOCK_MONOTONIC on Linux.
-        let (origin, origin_ns) = (Instant::now(), rt::now_mono_ns());
+        let (origin, origin_ns, origin_wall_ns) = (Instant::now(), rt::now_mono_ns(), rt::now_wall_ns());
         let at = |ns: u64| origin + Duration::from_nanos(ns.saturating_sub(origin_ns));
         let mut next_deadline_ns = origin_ns + p.period_ns;
+        if let Some(probe) = self.probe {
+            probe.set_grid(next_deadline_ns);
+        }
         let mut paced = p.mode == Mode::Realtime;
         let mut prev: Option<Decision> = None;
         let mut last_publish_ns: u64 = 0;
@@ -382,6 +387,7 @@ impl PlantLoop<'_> {
                 break;
             }
             let sim_t = tick as f64 * p.period_ns as f64 * 1e-9;
+            let mut skipped_now = 0;
             // 1. The deadline of this tick (paced modes), skipping ahead after a stall.
             let deadline_ns = if paced {
                 let now = rt::now_mono_ns();
@@ -390,6 +396,7 @@ impl PlantLoop<'_> {
                     let late_us = (now - next_deadline_ns) / 1000;
                     next_deadline_ns = deadline;
                     stats.overruns += skipped;
+                    skipped_now = skipped;
                     let mut s = StackText::new();
                     let _ = write!(s, "tick {tick}: loop {late_us} us late, skipped {skipped} periods");
                     if last_overrun_log.is_none_or(|(l, _)| tick >= l + ticks_per_s) {
@@ -415,6 +422,7 @@ impl PlantLoop<'_> {
                 tracing::error!("{e}");
                 self.event(tick, sim_t, EventKind::Fault, "publishing the state failed");
             }
+            let published_ns = rt::now_mono_ns();
             let period_ns = if last_publish_ns == 0 { 0 } else { publish_ns - last_publish_ns };
             if p.mode == Mode::Realtime && last_publish_ns != 0 {
                 stats.jitter.record(period_ns.abs_diff(p.period_ns));
@@ -424,10 +432,12 @@ impl PlantLoop<'_> {
 
             // 3. Wait for the torque of this tick (the active controller's; see the arbiter).
             answers.clear();
+            // The budget counts from the publish (a plant that woke late must not blame the
+            // controller), but never past the next tick's deadline.
+            let mut budget_end_ns = (publish_ns + p.budget_ns).min(deadline_ns + p.period_ns);
+            let budget_ns = if paced { p.budget_ns } else { p.watchdog_ns };
             if paced {
-                // The budget counts from the publish (a plant that woke late must not blame the
-                // controller), but never past the next tick's deadline.
-                self.wait_for_answers(tick, at((publish_ns + p.budget_ns).min(deadline_ns + p.period_ns)), &mut answers);
+                self.wait_for_answers(tick, at(budget_end_ns), &mut answers);
             } else if self.gate.status() == PlantStatus::WaitingForController {
                 // Lockstep start-up: hold tick 0 until a controller answers it.
                 while !rt::stop_requested() {
@@ -439,7 +449,8 @@ impl PlantLoop<'_> {
                     publish_ns = rt::now_mono_ns();
                 }
             } else {
-                self.wait_for_answers(tick, at(publish_ns + p.watchdog_ns), &mut answers);
+                budget_end_ns = publish_ns + p.watchdog_ns;
+                self.wait_for_answers(tick, at(budget_end_ns), &mut answers);
             }
             let active_gone = self.arbiter.active().is_some_and(|a| self.watch.is_some_and(|w| w.is_gone(a)));
             let (torque, arb_events) = self.arbiter.choose(&answers, active_gone, tick);
@@ -452,7 +463,7 @@ impl PlantLoop<'_> {
                 first_answer = Some((publish_ns, tick));
             }
             let recv_wall_ns = if torque.is_some() { rt::now_wall_ns() } else { 0 };
-            let diag = self.ports.receive_diagnostics_from(self.watch.map_or(0, |w| w.companion()), tick);
+            let (diag, late_diag) = self.ports.receive_diagnostics_from(self.watch.map_or(0, |w| w.companion()), tick);
 
             // 4. Decide and integrate.
             // A controller that is gone (rig reports its process ended, or the watcher saw its
@@ -547,10 +558,34 @@ impl PlantLoop<'_> {
                     missed: decision.missed,
                     plant_compute_ns: 0,
                     controller_compute_ns: diag.map_or(0, |d| d.compute_time_ns),
+                    stages: None,
                 },
             };
-            let plant_ns = pre_ns + (rt::now_mono_ns() - recv_ns);
+            let done_ns = rt::now_mono_ns();
+            let plant_ns = pre_ns + (done_ns - recv_ns);
             rec.timing.plant_compute_ns = plant_ns;
+            let rel = |t: u64| t as i64 - deadline_ns as i64;
+            let (probe_late_ns, probe_at_ns) = self.probe.map_or((0, 0), |p| p.take());
+            let since_start_us = |wall: u64| if wall == 0 { 0.0 } else { (wall as i64 - origin_wall_ns as i64) as f64 * 1e-3 };
+            rec.timing.stages = Some(StageStamps {
+                deadline_since_start_ns: deadline_ns.saturating_sub(origin_ns),
+                publish_since_start_us: since_start_us(publish_wall_ns),
+                torque_receive_since_start_us: since_start_us(recv_wall_ns),
+                skipped_periods: skipped_now.min(u64::from(u32::MAX)) as u32,
+                plant_woke_ns: rel(wake_ns),
+                state_published_ns: rel(published_ns),
+                budget_end_ns: rel(budget_end_ns),
+                torque_budget_ns: budget_ns,
+                torque_received_ns: rel(recv_ns),
+                plant_done_ns: rel(done_ns),
+                answered: torque.is_some(),
+                refused: decision.refused.is_some(),
+                controller: diag.and_then(|d| ControllerStamps::from_diag(&d, deadline_ns)),
+                late: late_diag.and_then(|d| Some((d.tick, ControllerStamps::from_diag(&d, deadline_ns)?))),
+                probe: self.probe.is_some(),
+                probe_late_ns,
+                probe_stall_from_ns: if probe_late_ns > 0 { rel(probe_at_ns) } else { 0 },
+            });
             stats.plant_compute.record(plant_ns);
             if let Some(r) = self.recorder.as_deref_mut() {
                 // Applied torque in the record, plus the controller's own answer (for replay).

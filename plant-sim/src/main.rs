@@ -1,5 +1,6 @@
 //! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR]
 //! [--live ADDR [--live-rate HZ]]`
+//! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR] [--host-probe]`
 //!
 //! Runs the plant daemon; at exit prints one line of JSON with the run's summary on stdout.
 //! Exit status: 0 run completed, 1 error, 69 the rig name is held by a live plant, 71 shared
@@ -40,6 +41,10 @@ struct Args {
     /// Per-tick channels of the live view at this rate, Hz of simulated time; 0: every tick.
     #[arg(long, default_value_t = recordings::live::DEFAULT_RATE_HZ, requires = "live")]
     live_rate: f64,
+    /// Run the host-floor probe beside the loop (a thread per CPU waking on 1 ms deadlines;
+    /// real time only): its latency and stalls go into the summary and `/timing`.
+    #[arg(long)]
+    host_probe: bool,
 }
 
 fn main() {
@@ -54,6 +59,7 @@ fn main() {
         out: a.out,
         cache_dir: a.cache_dir.unwrap_or_else(strip::cache::cache_dir),
         live: a.live.map(|addr| recordings::LiveConfig { addr, rate_hz: a.live_rate, ..Default::default() }),
+        host_probe: a.host_probe,
     };
     match plant_sim::run::run(&opts) {
         // Both writes tolerate a closed pipe: a launcher killed with SIGKILL leaves its end closed.

@@ -30,6 +30,8 @@ pub struct RunOptions {
     pub cache_dir: PathBuf,
     /// Serve the recording's channels live (Foxglove WebSocket); needs the recording enabled.
     pub live: Option<recordings::LiveConfig>,
+    /// Run the host-floor probe beside the loop (real time only; `rig timing` asks for it).
+    pub host_probe: bool,
 }
 
 /// Run length when neither the command line nor the scenario sets one: the nominal trajectory
@@ -59,6 +61,8 @@ pub struct RunSummary {
     pub rt: rt::RtSetup,
     /// The live view's address and what it sent and dropped, if it ran.
     pub live: Option<(std::net::SocketAddr, recordings::LiveSummary)>,
+    /// What the host-floor probe measured, per CPU (None: it did not run).
+    pub probe: Option<Vec<crate::probe::CpuReport>>,
 }
 
 impl RunSummary {
@@ -97,6 +101,10 @@ impl RunSummary {
             "jitter": s.jitter.to_json(&edges),
             "plant_compute": s.plant_compute.to_json(&edges),
             "controller_compute": s.controller_compute.to_json(&edges),
+            "host_probe": self.probe.as_ref().map(|cpus| serde_json::json!({
+                "stall_threshold_us": crate::probe::HOST_STALL_NS as f64 * 1e-3,
+                "cpus": cpus.iter().map(|c| c.to_json(&edges)).collect::<Vec<_>>(),
+            })),
         })
     }
 }
@@ -243,6 +251,20 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         r.record_event(&EventRecord::new(0, 0.0, EventKind::Start, &text));
     }
 
+    // The host-floor probe, one thread per CPU this process may use (README, "Timing").
+    let probe = match (opts.host_probe, mode) {
+        (true, Mode::Realtime) => {
+            let cpus = crate::probe::allowed_cpus();
+            let p = crate::probe::Probe::start(&cpus, period_ns).context("starting the host probe")?;
+            tracing::info!(?cpus, "host probe running (SCHED_FIFO {} when permitted)", crate::probe::PROBE_PRIORITY);
+            Some(p)
+        }
+        (true, Mode::Lockstep) => {
+            tracing::warn!("--host-probe applies to real-time runs only; not started in lockstep");
+            None
+        }
+        _ => None,
+    };
     let stats = PlantLoop {
         ports: &ports,
         physics: &mut physics,
@@ -253,8 +275,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         arbiter: &mut arbiter,
         watch: Some(&watch),
         reflex_limits: crate::limits::ReflexLimits::from_scenario(&scenario),
+        probe: probe.as_ref().map(|p| &*p.latest),
     }
     .run();
+    let probe = probe.map(crate::probe::Probe::finish);
     if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone()) {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
     }
@@ -268,7 +292,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         None => (None, None),
     };
     tracing::info!(ticks = stats.ticks, misses = stats.misses, safe_stops = stats.safe_stops, "plant stopped");
-    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live })
+    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live, probe })
 }
 
 /// What the recording's Foxglove channels draw: the scenario's tool and placement, and the strip

@@ -95,6 +95,8 @@ def walk(path):
                     msg = decoders[r.channel_id](r.data)
                     walk.rows[ch.topic].append([msg.tick, r.log_time, r.publish_time])
                     walk.decoded[ch.topic].append(msg)
+        except struct.error as e:  # the data ran out inside a record's fixed-size fields: cut there
+            walk.error = f"EndOfFile: the last record is cut ({e})"
         except Exception as e:  # a cut file ends in a partial record; a bad chunk raises on its CRC
             walk.error = f"{type(e).__name__}: {e}" if str(e) else f"{type(e).__name__} (the last record is cut)"
     return walk

@@ -43,6 +43,9 @@ impl<'a> CdrWriter<'a> {
         self.align(4);
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
+    pub fn i64(&mut self, v: i64) {
+        self.u64(v as u64);
+    }
     pub fn u64(&mut self, v: u64) {
         self.align(8);
         self.buf.extend_from_slice(&v.to_le_bytes());
@@ -121,6 +124,13 @@ impl<'a> CdrReader<'a> {
     }
     pub fn i32(&mut self, field: &'static str) -> Result<i32, CdrError> {
         Ok(i32::from_le_bytes(self.take(4, 4, field)?.try_into().unwrap()))
+    }
+    pub fn i64(&mut self, field: &'static str) -> Result<i64, CdrError> {
+        Ok(self.u64(field)? as i64)
+    }
+    /// True when every byte of the message is read (a message of an older, shorter schema).
+    pub fn at_end(&self) -> bool {
+        self.pos >= self.body.len()
     }
     pub fn u64(&mut self, field: &'static str) -> Result<u64, CdrError> {
         Ok(u64::from_le_bytes(self.take(8, 8, field)?.try_into().unwrap()))

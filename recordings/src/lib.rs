@@ -13,6 +13,7 @@
 //! - [`replay`] drives a controller open-loop from a recording and compares its torques.
 //! - [`cli`] holds the `rig replay` / `rig report` subcommands the `rig` binary wires in.
 
+pub mod attribution;
 pub mod cdr;
 pub mod cli;
 pub mod compare;
@@ -108,6 +109,74 @@ pub struct TimingRecord {
     pub plant_compute_ns: u64,
     /// Controller compute time reported in its diagnostics, ns (0 if none).
     pub controller_compute_ns: u64,
+    /// The tick's stage stamps (None in recordings made before they existed).
+    pub stages: Option<StageStamps>,
+}
+
+/// Where one tick's time went (README, "Timing: whose fault is a miss"). Every `*_ns` stamp is
+/// CLOCK_MONOTONIC ns after the tick's deadline (negative = before it), so a plot of them needs no
+/// rounding; `deadline_since_start_ns` places the deadline on the run's time line.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageStamps {
+    /// The tick's deadline, ns after the run's first deadline.
+    pub deadline_since_start_ns: u64,
+    /// The wall clock of `publish_wall_ns` / `torque_receive_wall_ns` as µs since the run's start
+    /// (a float64 that a plot does not round; 0 when no torque arrived).
+    pub publish_since_start_us: f64,
+    pub torque_receive_since_start_us: f64,
+    /// Whole periods the plant skipped just before this tick (it woke more than a period late).
+    pub skipped_periods: u32,
+    /// The plant woke from its deadline sleep.
+    pub plant_woke_ns: i64,
+    /// The plant's state and wrench were published (taken after the publish call; the controller,
+    /// notified inside it, may wake before this stamp).
+    pub state_published_ns: i64,
+    /// The end of the torque budget: the plant waits for the answer until then.
+    pub budget_end_ns: i64,
+    /// The torque budget from the publish, ns (`loop.torque_budget_us`; lockstep: the watchdog);
+    /// `budget_end_ns` is earlier when the next deadline cuts it.
+    pub torque_budget_ns: u64,
+    /// The plant stopped waiting: the answer arrived (`answered`) or the budget ran out.
+    pub torque_received_ns: i64,
+    /// The plant finished the tick (integrated; recording follows).
+    pub plant_done_ns: i64,
+    /// The active controller's torque for this tick arrived within the budget.
+    pub answered: bool,
+    /// That torque was refused (non-finite, beyond the limits, another contract version).
+    pub refused: bool,
+    /// The controller's own stamps for this tick came with its answer.
+    pub controller: Option<ControllerStamps>,
+    /// A late answer's stamps (diagnostics of an earlier tick that arrived during this one), and
+    /// that tick; its stamps are relative to THIS tick's deadline.
+    pub late: Option<(u64, ControllerStamps)>,
+    /// The host-floor probe ran (`rig timing`), and the latest any of its wake-ups was, ns, among
+    /// those it finished between the previous tick's end and this one's.
+    pub probe: bool,
+    pub probe_late_ns: u64,
+    /// The deadline that wake-up was late for: the stall ran from here for `probe_late_ns`.
+    pub probe_stall_from_ns: i64,
+}
+
+/// The controller's stage stamps of one tick, ns after a deadline ([`StageStamps`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ControllerStamps {
+    pub woke_ns: i64,
+    pub computed_ns: i64,
+    pub published_ns: i64,
+}
+
+impl ControllerStamps {
+    /// From a controller's diagnostics, relative to the deadline `deadline_mono_ns`; None when the
+    /// controller did not stamp (its stamps are 0).
+    #[inline]
+    pub fn from_diag(d: &ControllerDiagnostics, deadline_mono_ns: u64) -> Option<Self> {
+        let rel = |t: u64| t as i64 - deadline_mono_ns as i64;
+        (d.woke_mono_ns != 0 && d.published_mono_ns != 0).then(|| ControllerStamps {
+            woke_ns: rel(d.woke_mono_ns),
+            computed_ns: rel(d.computed_mono_ns.max(d.woke_mono_ns)),
+            published_ns: rel(d.published_mono_ns),
+        })
+    }
 }
 
 /// What kind of event an [`EventRecord`] reports.

@@ -111,6 +111,15 @@ pub struct ReportNumbers {
     /// Plant compute time per tick, us.
     pub plant_compute_us: Option<Percentiles>,
     pub rolling: Option<RollingNumbers>,
+    /// Real-time recordings: the control success rate (ticks answered in budget over periods),
+    /// its worst 100-period window, and the misses per cause ([`crate::attribution`]).
+    pub success_rate: Option<f64>,
+    pub worst_window_success_rate: Option<f64>,
+    pub misses_by_cause: Vec<(&'static str, u64)>,
+    /// The rig's and controller's own misses (all but the host's) per period.
+    pub own_miss_rate: Option<f64>,
+    #[serde(skip)]
+    pub attribution: Option<crate::attribution::Attribution>,
 }
 
 /// Index i (into the tick rows) of every tick where the wheel rolls: in contact and moving along
@@ -170,6 +179,11 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         .map(|t| t.timing.round_trip_ns as f64 * 1e-3)
         .collect();
     let plant = rec.timing.iter().map(|t| t.timing.plant_compute_ns as f64 * 1e-3).collect();
+    // Misses and success rate mean something against a clock: real-time recordings only.
+    let attribution = (rec.rig_metadata("mode") == Some("realtime")).then(|| crate::attribution::attribute(&rec.timing));
+    let by_cause = attribution.as_ref().filter(|a| a.stamped).map_or(Vec::new(), |a| {
+        crate::attribution::Cause::ALL.iter().map(|&c| (c.name(), a.count(c))).collect()
+    });
     ReportNumbers {
         file: rec.path.display().to_string(),
         integrity: rec.integrity.kind(),
@@ -193,6 +207,11 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         latency_us: Percentiles::of(latency),
         plant_compute_us: Percentiles::of(plant),
         rolling: rolling_numbers(rec),
+        success_rate: attribution.as_ref().filter(|a| a.periods > 0).map(|a| a.success_rate),
+        worst_window_success_rate: attribution.as_ref().and_then(|a| a.worst_window).map(|w| w.0),
+        misses_by_cause: by_cause,
+        own_miss_rate: attribution.as_ref().filter(|a| a.stamped && a.periods > 0).map(|a| a.own_miss_rate()),
+        attribution,
     }
 }
 
@@ -322,6 +341,9 @@ pub fn format_text(n: &ReportNumbers) -> String {
                 _ => writeln!(s, "bond        no centre-line pressure or node positions (metadata centreline_z_m) recorded"),
             };
         }
+    }
+    if let Some(a) = &n.attribution {
+        s += &crate::attribution::format_table(a);
     }
     s
 }

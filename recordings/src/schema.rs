@@ -6,7 +6,7 @@
 //! time is the same.
 
 use crate::cdr::{CdrError, CdrReader, CdrWriter};
-use crate::{EventKind, EventRecord, TickRecord, TimingRecord, MAX_CENTRELINE};
+use crate::{ControllerStamps, EventKind, EventRecord, StageStamps, TickRecord, TimingRecord, MAX_CENTRELINE};
 
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, CONTRACT_VERSION};
 
@@ -133,6 +133,33 @@ bool missed                     # torque late, missing or refused
 uint64 plant_compute_ns         # ns
 uint64 controller_compute_ns    # ns, from the diagnostics (0 if none)
 uint64 recorder_dropped         # records the recorder dropped so far (must stay 0)
+# Stage stamps (README, Timing): CLOCK_MONOTONIC ns after this tick's deadline (negative =
+# before it). Recordings made before them end at recorder_dropped.
+bool stamped                    # false: a writer without stamps, the fields below are zero
+uint64 deadline_since_start_ns  # ns, this tick's deadline after the run's first one
+float64 publish_since_start_us  # us, publish_wall_ns after the run's start (plots without rounding)
+float64 torque_receive_since_start_us  # us, torque_receive_wall_ns after the start, 0 if none
+uint32 skipped_periods          # periods the plant skipped just before this tick (a stall)
+int64 plant_woke_ns             # the plant woke from its deadline sleep
+int64 state_published_ns        # state and wrench published, controller notified
+int64 budget_end_ns             # the plant waits for the torque until then
+uint64 torque_budget_ns         # ns, the torque budget from the publish
+int64 torque_received_ns        # the wait ended: torque arrived (answered) or budget over
+int64 plant_done_ns             # the plant finished the tick
+bool answered                   # the active controller's torque arrived within the budget
+bool refused                    # ... and was refused (non-finite, limits, contract version)
+bool controller_stamped         # the controller's stamps of this tick came with its answer
+int64 controller_woke_ns        # controller woke for this state (0 if not stamped)
+int64 controller_computed_ns    # controller finished computing
+int64 torque_published_ns       # controller handed the torque to iceoryx2
+bool late_stamped               # a late answer's stamps arrived during this tick:
+uint64 late_tick                # its tick
+int64 late_controller_woke_ns   # its stamps, after THIS tick's deadline
+int64 late_controller_computed_ns
+int64 late_torque_published_ns
+bool probe                      # the host-floor probe ran (rig timing)
+uint64 probe_late_ns            # ns, latest probe wake-up finished since the previous tick
+int64 probe_stall_from_ns       # the deadline it was late for: the stall ran from here
 ================================================================================
 MSG: builtin_interfaces/Time
 int32 sec
@@ -306,6 +333,34 @@ pub fn encode_timing(buf: &mut Vec<u8>, r: &TickHead, recorder_dropped: u64) {
     w.u64(t.plant_compute_ns);
     w.u64(t.controller_compute_ns);
     w.u64(recorder_dropped);
+    let g = t.stages.unwrap_or_default();
+    w.bool(t.stages.is_some());
+    w.u64(g.deadline_since_start_ns);
+    w.f64(g.publish_since_start_us);
+    w.f64(g.torque_receive_since_start_us);
+    w.u32(g.skipped_periods);
+    w.i64(g.plant_woke_ns);
+    w.i64(g.state_published_ns);
+    w.i64(g.budget_end_ns);
+    w.u64(g.torque_budget_ns);
+    w.i64(g.torque_received_ns);
+    w.i64(g.plant_done_ns);
+    w.bool(g.answered);
+    w.bool(g.refused);
+    let c = g.controller.unwrap_or_default();
+    w.bool(g.controller.is_some());
+    w.i64(c.woke_ns);
+    w.i64(c.computed_ns);
+    w.i64(c.published_ns);
+    let (late_tick, l) = g.late.unwrap_or_default();
+    w.bool(g.late.is_some());
+    w.u64(late_tick);
+    w.i64(l.woke_ns);
+    w.i64(l.computed_ns);
+    w.i64(l.published_ns);
+    w.bool(g.probe);
+    w.u64(g.probe_late_ns);
+    w.i64(g.probe_stall_from_ns);
 }
 
 pub fn encode_event(buf: &mut Vec<u8>, e: &EventRecord) {
@@ -443,6 +498,10 @@ pub fn decode_controller(msg: &[u8]) -> Result<ControllerDiagnostics, CdrError> 
         rot_err_task_rad: r.f64_array("rot_err_task")?,
         force_integral_ns: r.f64("force_integral")?,
         compute_time_ns: r.u64("compute_time_ns")?,
+        // The stage stamps go to /timing, as offsets from the tick's deadline.
+        woke_mono_ns: 0,
+        computed_mono_ns: 0,
+        published_mono_ns: 0,
     })
 }
 
@@ -459,8 +518,53 @@ pub fn decode_timing(msg: &[u8]) -> Result<TimingRow, CdrError> {
         missed: r.bool("missed")?,
         plant_compute_ns: r.u64("plant_compute_ns")?,
         controller_compute_ns: r.u64("controller_compute_ns")?,
+        stages: None,
     };
-    Ok(TimingRow { tick, timing, recorder_dropped: r.u64("recorder_dropped")? })
+    let recorder_dropped = r.u64("recorder_dropped")?;
+    let mut timing = timing;
+    if !r.at_end() {
+        let stamped = r.bool("stamped")?;
+        let stages = decode_stages(&mut r)?;
+        timing.stages = stamped.then_some(stages);
+    }
+    Ok(TimingRow { tick, timing, recorder_dropped })
+}
+
+fn decode_stages(r: &mut CdrReader) -> Result<StageStamps, CdrError> {
+    let mut g = StageStamps {
+        deadline_since_start_ns: r.u64("deadline_since_start_ns")?,
+        publish_since_start_us: r.f64("publish_since_start_us")?,
+        torque_receive_since_start_us: r.f64("torque_receive_since_start_us")?,
+        skipped_periods: r.u32("skipped_periods")?,
+        plant_woke_ns: r.i64("plant_woke_ns")?,
+        state_published_ns: r.i64("state_published_ns")?,
+        budget_end_ns: r.i64("budget_end_ns")?,
+        torque_budget_ns: r.u64("torque_budget_ns")?,
+        torque_received_ns: r.i64("torque_received_ns")?,
+        plant_done_ns: r.i64("plant_done_ns")?,
+        answered: r.bool("answered")?,
+        refused: r.bool("refused")?,
+        ..StageStamps::default()
+    };
+    let stamped = r.bool("controller_stamped")?;
+    let c = ControllerStamps {
+        woke_ns: r.i64("controller_woke_ns")?,
+        computed_ns: r.i64("controller_computed_ns")?,
+        published_ns: r.i64("torque_published_ns")?,
+    };
+    g.controller = stamped.then_some(c);
+    let late = r.bool("late_stamped")?;
+    let late_tick = r.u64("late_tick")?;
+    let l = ControllerStamps {
+        woke_ns: r.i64("late_controller_woke_ns")?,
+        computed_ns: r.i64("late_controller_computed_ns")?,
+        published_ns: r.i64("late_torque_published_ns")?,
+    };
+    g.late = late.then_some((late_tick, l));
+    g.probe = r.bool("probe")?;
+    g.probe_late_ns = r.u64("probe_late_ns")?;
+    g.probe_stall_from_ns = r.i64("probe_stall_from_ns")?;
+    Ok(g)
 }
 
 pub fn decode_event(msg: &[u8], wall_ns: u64) -> Result<EventRow, CdrError> {
@@ -547,6 +651,25 @@ mod tests {
             missed: true,
             plant_compute_ns: 80_000,
             controller_compute_ns: 12_345,
+            stages: Some(StageStamps {
+                deadline_since_start_ns: 41_000_123,
+                publish_since_start_us: 41_012.5,
+                torque_receive_since_start_us: 41_556.25,
+                skipped_periods: 3,
+                plant_woke_ns: 2_100,
+                state_published_ns: 9_800,
+                budget_end_ns: 509_800,
+                torque_budget_ns: 500_000,
+                torque_received_ns: 509_900,
+                plant_done_ns: 540_000,
+                answered: false,
+                refused: true,
+                controller: Some(ControllerStamps { woke_ns: 20_000, computed_ns: 30_000, published_ns: 31_000 }),
+                late: Some((39, ControllerStamps { woke_ns: -1_900_000, computed_ns: -1_100_000, published_ns: -1_099_000 })),
+                probe: true,
+                probe_late_ns: 250_000,
+                probe_stall_from_ns: -400_000,
+            }),
         };
         r
     }
@@ -571,6 +694,12 @@ mod tests {
         assert_eq!(decode_controller(&buf).unwrap(), r.diag);
         encode_timing(&mut buf, &r, 7);
         assert_eq!(decode_timing(&buf).unwrap(), TimingRow { tick: 41, timing: r.timing, recorder_dropped: 7 });
+        // A message of the schema before the stage stamps (ends at recorder_dropped) still reads.
+        let mut old = r;
+        old.timing.stages = None;
+        encode_timing(&mut buf, &old, 7);
+        buf.truncate(4 + 8 + 8 + 8 * 4 + 1 + 7 + 8 * 3);
+        assert_eq!(decode_timing(&buf).unwrap(), TimingRow { tick: 41, timing: old.timing, recorder_dropped: 7 });
         // publish_stamp: sec + nanosec reassemble the wall clock exactly.
         let sec = i32::from_le_bytes(buf[12..16].try_into().unwrap()) as u64;
         let nsec = u32::from_le_bytes(buf[16..20].try_into().unwrap()) as u64;
@@ -614,6 +743,18 @@ mod tests {
             ["tick", "wheel_z", "contact_force", "bottom_force", "max_bottom_pressure", "top_displacement", "centreline_pressure", "centreline_z"]
         );
         assert_eq!(fields(EVENTS.schema_text), ["tick", "sim_time", "kind", "kind_name", "text"]);
+        assert_eq!(
+            fields(TIMING.schema_text),
+            [
+                "tick", "publish_stamp", "publish_wall_ns", "torque_receive_wall_ns", "round_trip_ns", "period_ns", "missed",
+                "plant_compute_ns", "controller_compute_ns", "recorder_dropped", "stamped", "deadline_since_start_ns", "publish_since_start_us",
+                "torque_receive_since_start_us", "skipped_periods", "plant_woke_ns", "state_published_ns", "budget_end_ns",
+                "torque_budget_ns", "torque_received_ns", "plant_done_ns", "answered", "refused", "controller_stamped",
+                "controller_woke_ns", "controller_computed_ns", "torque_published_ns", "late_stamped", "late_tick",
+                "late_controller_woke_ns", "late_controller_computed_ns", "late_torque_published_ns", "probe", "probe_late_ns",
+                "probe_stall_from_ns"
+            ]
+        );
         for k in EventKind::ALL {
             let line = format!("uint8 KIND_{}={}", k.name().to_uppercase(), k as u8);
             assert!(EVENTS.schema_text.contains(&line), "missing {line}");

@@ -1,7 +1,7 @@
 //! A hard write error in the middle of a run (here EFBIG from a file-size limit; disk_full.rs has
 //! a real ENOSPC): the writer stops with a clear reason, keeps draining so the loop never blocks,
-//! and cuts the file back to its last complete chunk. A size limit leaves no room for the footer
-//! (unlike ENOSPC, where disk_full.rs shows the file ended cleanly), so the file ends there and
+//! and cuts the file back to its last complete chunk. A size limit 100 bytes past a chunk
+//! boundary leaves no room for the footer (unlike ENOSPC, where disk_full.rs shows the file ended cleanly), so the file ends there and
 //! reads as cut, exactly at the chunk boundary. Own test binary: the limit applies to the process.
 
 use recordings::read::{Integrity, Recording};

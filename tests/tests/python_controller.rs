@@ -59,6 +59,19 @@ fn python_controller_holds_the_arm_in_lockstep_with_gravity_equal_to_the_rust_mo
     let bare = (robot::Robot::irb2400().gravity_torque(&q0) - g).norm() / g.norm();
     assert!(bare > 1e-3, "the tool changes g(q0) by only {bare:.2e}");
 
+    // Its stage stamps (contract version 2) arrive with every answer and sit, on the plant's own
+    // clock, between the plant's wake-up and its receipt, in the order taken (the controller may
+    // wake before the plant's "published" stamp: the notification goes out inside the publish).
+    for r in &rec.timing {
+        let s = r.timing.stages.expect("stage stamps on /timing");
+        let c = s.controller.unwrap_or_else(|| panic!("tick {}: no controller stamps", r.tick));
+        assert!(
+            s.plant_woke_ns <= c.woke_ns && c.woke_ns <= c.computed_ns && c.computed_ns <= c.published_ns && c.published_ns <= s.torque_received_ns,
+            "tick {}: plant woke {} controller woke {} computed {} handed over {} received {}",
+            r.tick, s.plant_woke_ns, c.woke_ns, c.computed_ns, c.published_ns, s.torque_received_ns
+        );
+    }
+
     let mut compute: Vec<u64> = rec.controller.iter().map(|d| d.compute_time_ns).collect();
     compute.sort_unstable();
     println!(
@@ -78,4 +91,48 @@ fn python_controller_exits_with_an_error_when_the_plant_dies() {
     let st = py.expect_exit(Duration::from_secs(5));
     assert!(!st.success(), "a dead plant is an error for the controller");
     assert!(py.stderr().contains("plant") && py.stderr().contains("silent"), "{}", py.stderr());
+}
+
+/// A controller of contract version 1 is refused with both versions named: the template as it was
+/// at version 1 (version 1, 120-byte diagnostics on `controller_diagnostics`), derived from the
+/// current file by undoing version 2's four changes. It opens its services (its diagnostics'
+/// service is its own: iceoryx2 would refuse a 120-byte payload on the plant's
+/// `controller_diagnostics_v2`) and exits 1 on the first state, naming both versions.
+#[test]
+fn a_version_1_controller_is_refused_with_both_versions_named() {
+    let v2 = std::fs::read_to_string(script()).unwrap();
+    let mut v1 = v2.clone();
+    for (from, to) in [
+        ("CONTRACT_VERSION = 2\n", "CONTRACT_VERSION = 1\n"),
+        ("(ControllerDiagnostics, 144)", "(ControllerDiagnostics, 120)"),
+        ("\"controller_diagnostics_v2\"", "\"controller_diagnostics\""),
+        (", woke_mono_ns=woke,\n                                     computed_mono_ns=computed, published_mono_ns=time.monotonic_ns())", ")"),
+    ] {
+        assert_eq!(v1.matches(from).count(), 1, "hold_controller.py changed: {from:?} not found once; update this test");
+        v1 = v1.replace(from, to);
+    }
+    // The three stamp fields (and their comment) go: the record ends at compute_time_ns again.
+    let (from, to) = ("(\"compute_time_ns\", u64),", "(\"published_mono_ns\", u64)]");
+    let (a, b) = (v1.find(from).expect("compute_time_ns field"), v1.find(to).expect("published_mono_ns field"));
+    assert!(a < b && v1[a..b].matches("_fields_").count() == 0, "hold_controller.py changed: update this test");
+    v1.replace_range(a..b + to.len(), "(\"compute_time_ns\", u64)]");
+    let dir = std::env::temp_dir().join(unique_rig("py-v1"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let old = dir.join("hold_controller_v1.py");
+    std::fs::write(&old, v1).unwrap();
+    std::fs::set_permissions(&old, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let Some((_g, _t, mut plant, mut py)) =
+        rig_tests::python_rig("a_version_1_controller_is_refused", "py-v1", 1.0, &old, "iceoryx2, pinocchio, numpy", "iceoryx2==0.10.0 pin numpy", "")
+    else {
+        return;
+    };
+    let st = py.expect_exit(Duration::from_secs(60));
+    let err = py.stderr();
+    assert!(!st.success(), "a version-1 controller ran: {err}");
+    assert!(
+        err.contains("contract version mismatch on joint state: peer speaks version 2, this process speaks version 1"),
+        "not refused by version (an iceoryx2 error instead?): {err}"
+    );
+    plant.signal(libc::SIGTERM);
+    plant.expect_exit(Duration::from_secs(10));
 }

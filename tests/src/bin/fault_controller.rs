@@ -14,7 +14,9 @@
 //!   `--stranger-after` states (default 100), answers every state with g(q) plus
 //!   `--stranger-nm` (default 40) N m on joint 1, and no PD.
 //! - `--sleep-us X --every N [--sleep-from TICK]`: sleep X µs before answering every Nth tick
-//!   (ticks with `tick % N == 0`, from TICK on): a slow controller.
+//!   (ticks with `tick % N == 0`, from TICK on): a slow controller. Its diagnostics carry the
+//!   stage stamps, the sleep counted as compute (`rig timing` attributes those misses to it).
+//! - `--rt-priority P`: run SCHED_FIFO at P (default 0: the normal scheduler).
 //!
 //! It never acknowledges a reflex: it always sends `controller_status` = 0 (active), so a reflex
 //! holds to the end of the run. It exits 0 on the plant's `shutting_down`, and with an error when
@@ -66,6 +68,9 @@ struct Args {
     /// Sleep only from this tick on.
     #[arg(long, default_value_t = 0)]
     sleep_from: u64,
+    /// Run SCHED_FIFO at this priority (0 = the normal scheduler), as the rig's controller does.
+    #[arg(long, default_value_t = 0)]
+    rt_priority: i32,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -132,6 +137,14 @@ fn run(a: &Args) -> anyhow::Result<u64> {
     let period = s.loop_.period_s;
     let stall = Duration::from_secs_f64(s.loop_.peer_stall_timeout_s);
     messages::ports::clean_dead_nodes();
+    if a.rt_priority > 0 {
+        let param = libc::sched_param { sched_priority: a.rt_priority };
+        // SAFETY: a plain syscall on the calling thread with a valid parameter.
+        let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+        if rc != 0 {
+            eprintln!("fault-controller: SCHED_FIFO {} refused ({}): default scheduler", a.rt_priority, std::io::Error::from_raw_os_error(rc));
+        }
+    }
     let role = if a.stranger { "stranger" } else { "fault-controller" };
     let ports = ControllerPorts::open(&a.rig, role)?;
     let watch = PeerWatch::spawn(&a.rig, &format!("{role}-watch"), Watched::Plant)?;
@@ -159,6 +172,7 @@ fn run(a: &Args) -> anyhow::Result<u64> {
             continue;
         };
         let t0 = Instant::now();
+        let woke_mono_ns = messages::monotonic_ns();
         last_state = t0;
         if plant != Some(origin) {
             plant = Some(origin);
@@ -216,9 +230,14 @@ fn run(a: &Args) -> anyhow::Result<u64> {
             controller_id: id,
             tau: tau.into(),
         };
+        // Stage stamps: a --sleep-us delay counts as compute (it sits between waking and the answer).
+        let computed_mono_ns = messages::monotonic_ns();
         let d = ControllerDiagnostics {
             tick: st.tick,
             compute_time_ns: t0.elapsed().as_nanos() as u64,
+            woke_mono_ns,
+            computed_mono_ns,
+            published_mono_ns: messages::monotonic_ns(),
             ..ControllerDiagnostics::zeroed(CONTRACT_VERSION)
         };
         // A stranger publishes torques only, like a process that knows nothing of the contract's
