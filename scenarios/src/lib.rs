@@ -139,6 +139,8 @@ pub struct Scenario {
     pub controller: ControllerConfig,
     pub recording: RecordingConfig,
     pub safety: SafetyConfig,
+    /// ABB Externally Guided Motion: the plant acts as the robot controller (off by default).
+    pub egm: EgmConfig,
 }
 
 /// Reflex limits of the plant (DESIGN section 10): crossing one puts the plant into safe stop at
@@ -156,6 +158,68 @@ pub struct SafetyConfig {
 impl Default for SafetyConfig {
     fn default() -> Self {
         Self { max_tcp_speed_mps: 0.25, max_contact_force_n: 40.0 }
+    }
+}
+
+/// ABB Externally Guided Motion (DESIGN section 11): with `enabled`, `plant-sim` acts as the
+/// IRB 2400's controller. Every `cycle_s` it sends `EgmRobot` to the sensor at `sensor_address`
+/// and takes its `EgmSensor` joint references; an emulated motion controller (reference delay,
+/// position correction with a low-pass, joint servo with model feed-forward) turns them into the
+/// torques the plant integrates. Defaults and their reasons: `plant-sim/README.md`, "EGM".
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EgmConfig {
+    pub enabled: bool,
+    /// UDP address of the EGM sensor (the client program), `host:port`.
+    pub sensor_address: String,
+    /// EGM cycle, s: one `EgmRobot` and one `EgmSensor` per cycle (ABB: typically 4 ms).
+    pub cycle_s: f64,
+    /// No valid sensor message for this long ends the EGM session (the robot holds), s.
+    pub comm_timeout_s: f64,
+    /// Total lag from a sensor's joint reference to the joint following it on a ramp, s.
+    pub lag_s: f64,
+    /// Bandwidth of the position correction's first-order low-pass on the references, Hz.
+    pub lowpass_hz: f64,
+    /// EGM position-correction gain (ABB's `\PosCorrGain`, 0..1): 1 follows the position
+    /// references, 0 only the speed references.
+    pub pos_corr_gain: f64,
+    /// Joint servo: natural frequency of the joint position/velocity loop, Hz.
+    pub servo_bandwidth_hz: f64,
+    /// Joint servo: damping ratio.
+    pub servo_damping_ratio: f64,
+}
+
+impl Default for EgmConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            sensor_address: "127.0.0.1:6510".into(),
+            cycle_s: 0.004,
+            comm_timeout_s: 1.0,
+            lag_s: 0.012,
+            lowpass_hz: 20.0,
+            pos_corr_gain: 1.0,
+            servo_bandwidth_hz: 30.0,
+            servo_damping_ratio: 1.0,
+        }
+    }
+}
+
+impl EgmConfig {
+    /// Ramp lag of the position correction, s: `1 / (pos_corr_gain 2π lowpass_hz)` (infinite at
+    /// gain 0, where only speed references move the robot).
+    pub fn correction_lag_s(&self) -> f64 {
+        1.0 / (self.pos_corr_gain * 2.0 * std::f64::consts::PI * self.lowpass_hz)
+    }
+
+    /// The pure delay in front of the correction, s: the total lag less the correction's (the
+    /// servo's feed-forward makes its own ramp lag zero). Gain 0: the whole lag.
+    pub fn delay_s(&self) -> f64 {
+        if self.pos_corr_gain > 0.0 {
+            self.lag_s - self.correction_lag_s()
+        } else {
+            self.lag_s
+        }
     }
 }
 
