@@ -55,6 +55,8 @@ pub struct RunSummary {
     pub recording_stopped_early: Option<String>,
     pub mode: Mode,
     pub rt: rt::RtSetup,
+    /// The EGM counters, when the scenario's `[egm]` is enabled.
+    pub egm: Option<crate::egm::EgmStats>,
 }
 
 impl RunSummary {
@@ -92,6 +94,12 @@ impl RunSummary {
             "jitter": s.jitter.to_json(&edges),
             "plant_compute": s.plant_compute.to_json(&edges),
             "controller_compute": s.controller_compute.to_json(&edges),
+            "egm": self.egm.map(|e| serde_json::json!({
+                "accepted": e.accepted,
+                "refused": e.refused,
+                "cycles": e.cycles,
+                "session_ended_tick": e.session_ended_tick,
+            })),
         })
     }
 }
@@ -230,18 +238,28 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         r.record_event(&EventRecord::new(0, 0.0, EventKind::Start, &text));
     }
 
-    let stats = PlantLoop {
-        ports: &ports,
-        physics: &mut physics,
-        gate: &mut gate,
-        recorder: recorder.as_mut(),
-        params,
-        last_log_tick: None,
-        arbiter: &mut arbiter,
-        watch: Some(&watch),
-        reflex_limits: crate::limits::ReflexLimits::from_scenario(&scenario),
-    }
-    .run();
+    // [egm] enabled: the plant is an ABB robot controller speaking EGM over UDP (`egm/`),
+    // instead of taking torques over iceoryx2.
+    let (stats, egm) = if scenario.egm.enabled {
+        let ep = crate::egm::EgmParams::from_scenario(&scenario, mode, params.n_ticks)?;
+        tracing::info!(sensor = %ep.sensor, "EGM: sending EgmRobot every {} s", scenario.egm.cycle_s);
+        let (stats, es) = crate::egm::EgmLoop::new(&scenario, &mut physics, recorder.as_mut(), ep)?.run();
+        (stats, Some(es))
+    } else {
+        let stats = PlantLoop {
+            ports: &ports,
+            physics: &mut physics,
+            gate: &mut gate,
+            recorder: recorder.as_mut(),
+            params,
+            last_log_tick: None,
+            arbiter: &mut arbiter,
+            watch: Some(&watch),
+            reflex_limits: crate::limits::ReflexLimits::from_scenario(&scenario),
+        }
+        .run();
+        (stats, None)
+    };
     if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone()) {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
     }
@@ -251,5 +269,5 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         None => None,
     };
     tracing::info!(ticks = stats.ticks, misses = stats.misses, safe_stops = stats.safe_stops, "plant stopped");
-    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup })
+    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, egm })
 }

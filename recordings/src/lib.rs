@@ -116,10 +116,14 @@ pub enum EventKind {
     ForeignTorque = 14,
     /// The controller process ended (reported by the launcher) or its node was found dead.
     ControllerEnded = 15,
+    /// The EGM session started (first valid sensor message) or ended (comm_timeout, reflex).
+    EgmSession = 16,
+    /// An `EgmSensor` message was refused (sequence number, joint or speed limits, malformed).
+    EgmRefused = 17,
 }
 
 impl EventKind {
-    pub const ALL: [EventKind; 16] = [
+    pub const ALL: [EventKind; 18] = [
         Self::Start,
         Self::Stop,
         Self::ModeChange,
@@ -136,6 +140,8 @@ impl EventKind {
         Self::EndStop,
         Self::ForeignTorque,
         Self::ControllerEnded,
+        Self::EgmSession,
+        Self::EgmRefused,
     ];
 
     pub fn from_u8(v: u8) -> Option<Self> {
@@ -161,6 +167,8 @@ impl EventKind {
             Self::EndStop => "end_stop",
             Self::ForeignTorque => "foreign_torque",
             Self::ControllerEnded => "controller_ended",
+            Self::EgmSession => "egm_session",
+            Self::EgmRefused => "egm_refused",
         }
     }
 }

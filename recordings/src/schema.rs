@@ -159,6 +159,8 @@ uint8 KIND_REFLEX=12
 uint8 KIND_END_STOP=13
 uint8 KIND_FOREIGN_TORQUE=14
 uint8 KIND_CONTROLLER_ENDED=15
+uint8 KIND_EGM_SESSION=16
+uint8 KIND_EGM_REFUSED=17
 uint64 tick
 float64 sim_time                # s
 uint8 kind                      # KIND_*

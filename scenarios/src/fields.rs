@@ -290,9 +290,12 @@ pub static FIELDS: &[Field] = &[
     ),
     num("egm.comm_timeout_s", "s", range(of(1.0, "egm.cycle_s", false), hi_in(3600.0)), "No valid sensor message for this long ends the EGM session: the robot holds its position, an `/events` entry says why (ABB's CommTimeout)."),
     with_rule(
-        num("egm.lag_s", "s", range(lo_in(0.0), hi_in(1.0)), "Total lag of the emulated motion controller: from a joint reference to the joint following it on a ramp (pure delay plus the position correction's low-pass; 12 ms default)."),
-        "at least the position correction's own lag 1/(egm.pos_corr_gain 2π egm.lowpass_hz)",
-        |s| if s.egm.delay_s() >= -1e-12 { Ok(()) } else { Err(format!("that lag is {} s", fmt_num(s.egm.correction_lag_s()))) },
+        num("egm.lag_s", "s", range(lo_in(0.0), hi_in(1.0)), "Total lag of the emulated motion controller: from a joint reference to the joint following it on a ramp (pure delay, the position correction's low-pass and the joint servo's half tick; 12 ms default)."),
+        "at least the position correction's own lag 1/(egm.pos_corr_gain 2π egm.lowpass_hz) plus half of loop.period_s (the joint servo's)",
+        |s| {
+            let own = s.egm.lag_s - s.egm.delay_s(s.loop_.period_s);
+            if s.egm.delay_s(s.loop_.period_s) >= -1e-12 { Ok(()) } else { Err(format!("that lag is {} s", fmt_num(own))) }
+        },
     ),
     num("egm.lowpass_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Bandwidth of the position correction's first-order low-pass on the references (ABB's EGM low-pass filter, 20 Hz by default)."),
     num("egm.pos_corr_gain", "", range(lo_in(0.0), hi_in(1.0)), "EGM position-correction gain (ABB's PosCorrGain): 1 follows the position references, 0 only the speed references."),

@@ -212,14 +212,12 @@ impl EgmConfig {
         1.0 / (self.pos_corr_gain * 2.0 * std::f64::consts::PI * self.lowpass_hz)
     }
 
-    /// The pure delay in front of the correction, s: the total lag less the correction's (the
-    /// servo's feed-forward makes its own ramp lag zero). Gain 0: the whole lag.
-    pub fn delay_s(&self) -> f64 {
-        if self.pos_corr_gain > 0.0 {
-            self.lag_s - self.correction_lag_s()
-        } else {
-            self.lag_s
-        }
+    /// The pure delay in front of the correction, s: the total lag less the correction's and
+    /// less half a control period (the joint servo's torque is held over a tick, so the joint
+    /// follows its reference half a tick behind). Gain 0: no correction lag.
+    pub fn delay_s(&self, period_s: f64) -> f64 {
+        let correction = if self.pos_corr_gain > 0.0 { self.correction_lag_s() } else { 0.0 };
+        self.lag_s - correction - 0.5 * period_s
     }
 }
 
