@@ -74,8 +74,10 @@ struct RunArgs {
 /// What `rig run` and `rig sweep` start and where they write.
 #[derive(Debug, clap::Args)]
 struct LaunchArgs {
-    /// Controller executable (default: `controller` next to `rig`). Any program that takes
-    /// `--rig NAME --scenario FILE` and speaks the contract of messages/README.md.
+    /// Controller executable (default: `controller` next to `rig`; `egm-controller` for a
+    /// scenario with `[egm] enabled`). Any program that takes `--rig NAME --scenario FILE` and
+    /// speaks the contract of messages/README.md (or EGM). `none` with an EGM scenario: start no
+    /// controller, the plant waits for an external EGM client at `egm.sensor_address`.
     #[arg(long)]
     controller: Option<PathBuf>,
     /// Simulated seconds to run, per case for a sweep (default: the scenario's).
@@ -202,7 +204,9 @@ fn prepare(
     // Fail early, with file/line/field, before any process starts.
     let parsed = scenario::Scenario::load(&scenario)?;
     check_duration(duration_flag, duration_s, &parsed, &scenario)?;
-    if let Some(p) = &controller {
+    let no_controller = controller.as_deref() == Some(Path::new("none"));
+    anyhow::ensure!(!no_controller || parsed.egm.enabled, "--controller none needs a scenario with [egm] enabled (an external EGM client answers the plant); {} has none", scenario.display());
+    if let Some(p) = controller.as_ref().filter(|_| !no_controller) {
         check_controller(p)?;
     }
     let lockstep = match mode.as_deref() {
@@ -214,6 +218,7 @@ fn prepare(
     let plant_bin = supervise::sibling_binary("plant-sim")?;
     let controller_bin = match controller {
         Some(p) => p,
+        None if parsed.egm.enabled => supervise::sibling_binary("egm-controller")?,
         None => supervise::sibling_binary("controller")?,
     };
     // The one strip-model cache `rig model build` fills too.
@@ -230,6 +235,7 @@ fn prepare(
         // Same CPU as plant-sim's lockstep loop.
         controller_cpu: lockstep.then(plant_sim::rt::lockstep_cpu),
         quiet: false,
+        no_controller,
     })
 }
 

@@ -301,6 +301,7 @@ pub static FIELDS: &[Field] = &[
     num("egm.pos_corr_gain", "", range(lo_in(0.0), hi_in(1.0)), "EGM position-correction gain (ABB's PosCorrGain): 1 follows the position references, 0 only the speed references."),
     num("egm.servo_bandwidth_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Natural frequency of the emulated joint position/velocity servo (with model feed-forward)."),
     num("egm.servo_damping_ratio", "", range(lo_ex(0.0), hi_in(10.0)), "Damping ratio of that servo."),
+    num("egm.force_phase_margin_deg", "°", range(lo_ex(0.0), hi_ex(90.0)), "The EGM force controller (`egm-controller`): phase margin its admittance is designed for, with the motion controller's delay and low-pass in the loop."),
 ];
 
 /// The field called `key` (`section.field`).

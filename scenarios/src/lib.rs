@@ -187,6 +187,8 @@ pub struct EgmConfig {
     pub servo_bandwidth_hz: f64,
     /// Joint servo: damping ratio.
     pub servo_damping_ratio: f64,
+    /// The EGM force controller's design target: phase margin of its force loop, degrees.
+    pub force_phase_margin_deg: f64,
 }
 
 impl Default for EgmConfig {
@@ -201,6 +203,7 @@ impl Default for EgmConfig {
             pos_corr_gain: 1.0,
             servo_bandwidth_hz: 30.0,
             servo_damping_ratio: 1.0,
+            force_phase_margin_deg: 60.0,
         }
     }
 }

@@ -83,7 +83,9 @@ fn abb_robot_client_reads_the_rigs_joints_holds_then_steps_axis_6_with_the_docum
     assert_eq!(summary["refusals"], 0, "{summary}");
     assert_eq!(summary["safe_stops"], 0, "{summary}");
     assert_eq!(summary["egm"]["accepted"], 125, "{summary}");
-    assert_eq!(log.len(), 125, "one EgmRobot per 4 ms cycle");
+    assert_eq!(log.len(), 126, "one EgmRobot per 4 ms cycle and the MCI_STOPPED of the run's end");
+    assert_eq!(log[125]["mci"], 2, "MCI_STOPPED at the end");
+    let log = &log[..125];
     rec.check_continuity().unwrap();
     assert_eq!(rec.events_of(EventKind::EgmSession).count(), 1, "{:?}", rec.events);
 
@@ -91,7 +93,7 @@ fn abb_robot_client_reads_the_rigs_joints_holds_then_steps_axis_6_with_the_docum
     // q of the same tick, the TCP position against forward kinematics of it.
     let s = scenario::Scenario::load(&rig.scenario).unwrap();
     let model = plant_sim::physics::plant_robot(&s);
-    for e in &log {
+    for e in log {
         let tick = e["tm"].as_u64().unwrap();
         let q = rec.joint_state.iter().find(|j| j.tick == tick).expect("the tick of the message").q;
         let abb = egm::axes::abb_deg_from_dh(&q);

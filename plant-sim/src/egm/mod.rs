@@ -20,7 +20,8 @@
 //!   session.
 //! - *stopped*: after a comm timeout or a reflex the robot holds where its servo reference is, a
 //!   last `EgmRobot` says `MCI_STOPPED`, and no more are sent; the run goes on to its end, and the
-//!   summary counts a safe stop (`rig run` exits 4).
+//!   summary counts a safe stop (`rig run` exits 4). The run's end also sends a last
+//!   `MCI_STOPPED` message.
 //!
 //! Refused sensor messages (sequence, limits, malformed) change nothing; each streak is one
 //! `/events` entry (`egm_refused`) and the summary counts each (`refusals`). The per-tick path
@@ -437,6 +438,12 @@ impl EgmLoop<'_> {
             }
             tick += 1;
             deadline_ns += p.period_ns;
+        }
+        // The end of the run ends the session too: a last EgmRobot says MCI_STOPPED, so a sensor
+        // can end at once.
+        if self.state != SessionState::Stopped {
+            self.state = SessionState::Stopped;
+            self.send_robot(tick);
         }
         stats.ticks = tick;
         stats.refusals = es.refused;
