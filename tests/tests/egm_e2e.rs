@@ -183,3 +183,95 @@ fn an_out_of_range_reference_is_refused_with_an_event_and_the_arm_stays() {
     let drift = rec.joint_state.iter().map(|s| (Vec6::from(s.q) - Vec6::from(q0)).amax()).fold(0.0, f64::max);
     assert!(drift < 1e-6, "the refused reference moved the arm by {drift} rad");
 }
+
+/// `scenarios/egm.toml` with the sensor on `port`, written into `dir`.
+fn egm_scenario_on(dir: &Path, port: u16) -> PathBuf {
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/egm.toml")).unwrap();
+    assert!(text.contains("sensor_address = \"127.0.0.1:6510\""));
+    let p = dir.join("egm.toml");
+    std::fs::write(&p, text.replace("127.0.0.1:6510", &format!("127.0.0.1:{port}"))).unwrap();
+    p
+}
+
+/// The thesis run over EGM in lockstep: `egm-controller` bound first, then the plant.
+fn egm_thesis_run(tag: &str) -> (PathBuf, Recording) {
+    let rig = unique_rig(tag);
+    let dir = temp_dir(&rig);
+    let port = free_port();
+    let sc = egm_scenario_on(&dir, port);
+    let mut ctrl = Daemon::start("egm-controller", &bin("egm-controller"), &["--scenario", sc.to_str().unwrap()], &dir);
+    wait_bound(port, &mut ctrl);
+    let out = dir.join("run.mcap");
+    let mut plant = Daemon::start("plant", &bin("plant-sim"), &["--rig", &rig, "--scenario", sc.to_str().unwrap(), "--mode", "lockstep", "--out", out.to_str().unwrap()], &dir);
+    // The first run may build and cache the strip model.
+    assert!(plant.expect_exit(Duration::from_secs(300)).success(), "plant: {}", plant.stderr());
+    assert!(ctrl.expect_exit(Duration::from_secs(10)).success(), "egm-controller: {}", ctrl.stderr());
+    let summary = plant_summary(&plant);
+    assert_eq!(summary["safe_stops"], 0, "{summary}");
+    assert_eq!(summary["refusals"], 0, "{summary}");
+    assert_eq!(summary["drops"], 0, "{summary}");
+    (sc, Recording::open_complete(&out).expect("complete recording"))
+}
+
+#[test]
+fn egm_thesis_run_in_lockstep_is_bit_identical_and_within_the_designs_bound() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let (sc, a) = egm_thesis_run("egm-thesis-a");
+    let (_, b) = egm_thesis_run("egm-thesis-b");
+    assert_eq!(a.joint_state.len(), b.joint_state.len());
+    let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for k in 0..a.joint_state.len() {
+        let (sa, sb) = (&a.joint_state[k], &b.joint_state[k]);
+        assert_eq!(sa.tick, sb.tick);
+        assert_eq!(bits(&sa.q), bits(&sb.q), "q differs at row {k}");
+        assert_eq!(bits(&sa.qd), bits(&sb.qd), "qd differs at row {k}");
+        assert_eq!(bits(&a.joint_torque[k].torque.tau), bits(&b.joint_torque[k].torque.tau), "torque differs at row {k}");
+        assert_eq!(bits(&a.wrench[k].force), bits(&b.wrench[k].force), "wrench differs at row {k}");
+        assert_eq!(a.strip[k].bottom_force_n.to_bits(), b.strip[k].bottom_force_n.to_bits(), "bottom force differs at row {k}");
+    }
+    let s = scenario::Scenario::load(&sc).unwrap();
+    let roll = recordings::report::numbers(&a).rolling.expect("the wheel rolled");
+    let (max, rms) = (roll.force_error_max_abs_n.unwrap(), roll.force_error_rms_n.unwrap());
+    assert!(roll.rolled_length_m > 0.0359, "rolled {} m", roll.rolled_length_m);
+    let model = strip::StripModel::load_or_build(&plant_sim::contact::strip_params(&s)).unwrap();
+    let d = design::egm::design_egm(&s, &model, 0.020);
+    println!(
+        "EGM thesis run (lockstep): force error max {max:.3} N, RMS {rms:.3} N, bond {:.1} % of the rolled length; design bound {:.3} N, margins {:?}",
+        100.0 * roll.bond_pressure_share.unwrap_or(0.0),
+        d.force_error_bound_n,
+        d.margins
+    );
+    assert!(max <= d.force_error_bound_n, "max force error {max:.3} N beyond the design's bound {:.3} N", d.force_error_bound_n);
+    let m = d.margins.expect("the loop crosses over");
+    assert!(m.phase_margin_deg > 45.0, "{m:?}");
+}
+
+#[test]
+fn rig_run_with_controller_none_waits_for_an_external_egm_client() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !python_has("rig_run_controller_none", "abb_robot_client.egm, numpy", "abb-robot-client numpy") {
+        return;
+    }
+    let t = TestRig::new("egm-none", "lockstep");
+    let port = free_port();
+    let sc = write_scenario(&t.dir, "lockstep", &format!("[egm]\nenabled = true\nsensor_address = \"127.0.0.1:{port}\"\n"));
+    let log = t.dir.join("client.json");
+    let mut client = Daemon::start("egm-client", Path::new("python3"), &[client_script().to_str().unwrap(), &port.to_string(), log.to_str().unwrap(), "step"], &t.dir);
+    wait_bound(port, &mut client);
+    let out = t.dir.join("out");
+    let mut rig = Daemon::start("rig", &bin("rig"), &["run", sc.to_str().unwrap(), "--controller", "none", "--duration", "0.3", "--out", out.to_str().unwrap()], &t.dir);
+    let st = rig.expect_exit(Duration::from_secs(60));
+    assert_eq!(st.code(), Some(0), "rig run: {}\n{}", rig.stdout(), rig.stderr());
+    assert!(client.expect_exit(Duration::from_secs(20)).success(), "{}", client.stderr());
+    let rec = Recording::open_complete(out.join("run.mcap")).unwrap();
+    assert_eq!(rec.joint_state.len(), 300);
+    assert_eq!(rec.events_of(EventKind::EgmSession).count(), 1, "{:?}", rec.events);
+    let answered: Vec<serde_json::Value> = serde_json::from_str(&std::fs::read_to_string(&log).unwrap()).unwrap();
+    assert_eq!(answered.len(), 76, "75 cycles and the end's MCI_STOPPED");
+    // no controller of the rig ran: `--controller none` with a torque scenario is refused
+    let plain = write_scenario(&t.dir, "lockstep", "");
+    let mut refused = Daemon::start("rig-refused", &bin("rig"), &["run", plain.to_str().unwrap(), "--controller", "none"], &t.dir);
+    let st = refused.expect_exit(Duration::from_secs(20));
+    assert_ne!(st.code(), Some(0));
+    assert!(refused.stderr().contains("--controller none needs a scenario with [egm] enabled"), "{}", refused.stderr());
+}
