@@ -181,6 +181,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
                 ("substeps".to_string(), l.substeps.to_string()),
                 ("integrator".to_string(), l.integrator.name().to_string()),
             ];
+            if scenario.egm.enabled {
+                let lag = crate::egm::servo::ServoParams::from_scenario(&scenario).lag_s();
+                metadata.push((crate::recording::EGM_METADATA_KEY.to_string(), lag.to_string()));
+            }
             // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
             if let Some(c) = physics.contact() {
                 metadata.push(("centreline_z_m".to_string(), format!("{:?}", c.centreline_z_m())));

@@ -88,6 +88,17 @@ fn abb_robot_client_reads_the_rigs_joints_holds_then_steps_axis_6_with_the_docum
     let log = &log[..125];
     rec.check_continuity().unwrap();
     assert_eq!(rec.events_of(EventKind::EgmSession).count(), 1, "{:?}", rec.events);
+    // /egm: one row per cycle with the reference the client sent (its seqno stepping by 2)
+    assert_eq!(rec.egm.len(), 125);
+    for (c, e) in rec.egm.iter().zip(log.iter()) {
+        assert_eq!(c.tick, e["tm"].as_u64().unwrap());
+        assert_eq!((c.replies, c.accepted, c.session_state), (1, 1, 1), "tick {}", c.tick);
+        assert_eq!(c.sensor_seqno, 2 * (c.tick as u32 / 4) + 1, "tick {}", c.tick);
+        // (serde_json parses to within an ulp of Python's repr)
+        let sent = floats(&e["sent"]);
+        assert!((0..6).all(|i| (c.joints_ref_deg[i] - sent[i]).abs() < 1e-12), "tick {}: {:?} vs {sent:?}", c.tick, c.joints_ref_deg);
+        assert!((c.servo_lag_s - 0.012).abs() < 1e-12);
+    }
 
     // What the client reads is the rig's state in ABB's convention: joints against the recorded
     // q of the same tick, the TCP position against forward kinematics of it.

@@ -43,7 +43,7 @@ use scenario::{Mode, Scenario};
 use crate::limits::ReflexLimits;
 use crate::loop_rt::{LoopStats, StackText};
 use crate::physics::Physics;
-use crate::recording::{EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
+use crate::recording::{EgmRecord, EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
 use crate::rt;
 use servo::{Servo, ServoParams};
 use session::{Refusal, Rules, SensorBuffer};
@@ -285,6 +285,7 @@ impl EgmLoop<'_> {
         let mut first_answer: Option<(u64, u64)> = None;
         let mut tick: u64 = 0;
         let mut last_tau = Vec6::zeros();
+        let mut cycle = EgmRecord { servo_lag_s: self.servo.params().lag_s(), ..EgmRecord::default() };
         while tick < p.n_ticks {
             if rt::stop_requested() {
                 stats.stopped_by_signal = true;
@@ -331,6 +332,7 @@ impl EgmLoop<'_> {
             // 2. Take the replies: lockstep one per cycle, real time all that arrived.
             let take = if p.mode == Mode::Lockstep { usize::from(cycle_tick && self.state != SessionState::Stopped) } else { usize::MAX };
             let mut taken = 0;
+            let mut accepted_now = 0;
             while taken < take && self.state != SessionState::Stopped {
                 let Some(result) = self.take_one(&mut buf) else { break };
                 taken += 1;
@@ -338,6 +340,10 @@ impl EgmLoop<'_> {
                 match result {
                     Ok(a) => {
                         es.accepted += 1;
+                        accepted_now += 1;
+                        cycle.sensor_seqno = a.seqno;
+                        cycle.joints_ref_deg = a.joints_deg;
+                        cycle.speed_ref_deg_s = a.speed_deg_s;
                         refusing = false;
                         last_valid_ns = rt::now_mono_ns();
                         self.servo.set_reference(a.q_ref, a.qd_ref);
@@ -365,6 +371,19 @@ impl EgmLoop<'_> {
             }
             if answered && cycle_tick {
                 stats.round_trip.record(latency_ns);
+            }
+            if cycle_tick && (self.state != SessionState::Stopped || taken > 0) {
+                cycle.tick = tick;
+                cycle.sim_time_s = tick as f64 * p.period_ns as f64 * 1e-9;
+                cycle.robot_seqno = self.robot_seqno;
+                cycle.session_state = self.state as u8;
+                cycle.replies = taken as u32;
+                cycle.accepted = accepted_now;
+                cycle.servo_ref_rad = self.servo.servo_reference().into();
+                cycle.reply_latency_ns = if answered { latency_ns } else { 0 };
+                if let Some(r) = self.recorder.as_deref_mut() {
+                    r.record_egm(&cycle);
+                }
             }
             // 3. Session timeout: no valid sensor message for comm_timeout (wall clock).
             if self.state == SessionState::Running && rt::now_mono_ns().saturating_sub(last_valid_ns) > p.comm_timeout_ns {
