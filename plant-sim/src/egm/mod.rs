@@ -285,6 +285,7 @@ impl EgmLoop<'_> {
         let mut first_answer: Option<(u64, u64)> = None;
         let mut tick: u64 = 0;
         let mut last_tau = Vec6::zeros();
+        let mut last_sent_ns = origin_ns;
         let mut cycle = EgmRecord { servo_lag_s: self.servo.params().lag_s(), ..EgmRecord::default() };
         while tick < p.n_ticks {
             if rt::stop_requested() {
@@ -308,7 +309,7 @@ impl EgmLoop<'_> {
             if cycle_tick && self.state != SessionState::Stopped {
                 es.cycles += 1;
                 self.send_robot(tick);
-                let sent_ns = rt::now_mono_ns();
+                last_sent_ns = rt::now_mono_ns();
                 if p.mode == Mode::Lockstep {
                     if self.state == SessionState::Waiting {
                         while !rt::stop_requested() && !self.wait_readable(LOCKSTEP_RESEND) {
@@ -327,7 +328,6 @@ impl EgmLoop<'_> {
                         break;
                     }
                 }
-                latency_ns = rt::now_mono_ns() - sent_ns;
             }
             // 2. Take the replies: lockstep one per cycle, real time all that arrived.
             let take = if p.mode == Mode::Lockstep { usize::from(cycle_tick && self.state != SessionState::Stopped) } else { usize::MAX };
@@ -369,18 +369,28 @@ impl EgmLoop<'_> {
                     }
                 }
             }
-            if answered && cycle_tick {
+            // Reply latency: from this cycle's EgmRobot to the reply taken (real time: at the tick
+            // the reply was found, so to within a tick).
+            if answered {
+                latency_ns = rt::now_mono_ns() - last_sent_ns;
                 stats.round_trip.record(latency_ns);
             }
-            if cycle_tick && (self.state != SessionState::Stopped || taken > 0) {
+            // /egm: one row per cycle, written at its end (lockstep: the reply came at its start).
+            if cycle_tick {
                 cycle.tick = tick;
                 cycle.sim_time_s = tick as f64 * p.period_ns as f64 * 1e-9;
                 cycle.robot_seqno = self.robot_seqno;
+                (cycle.replies, cycle.accepted, cycle.reply_latency_ns) = (0, 0, 0);
+            }
+            cycle.replies += taken as u32;
+            cycle.accepted += accepted_now;
+            if answered {
+                cycle.reply_latency_ns = latency_ns;
+            }
+            let cycle_end = if p.mode == Mode::Lockstep { cycle_tick } else { (tick + 1) % p.cycle_ticks == 0 };
+            if cycle_end && (self.state != SessionState::Stopped || cycle.replies > 0) {
                 cycle.session_state = self.state as u8;
-                cycle.replies = taken as u32;
-                cycle.accepted = accepted_now;
                 cycle.servo_ref_rad = self.servo.servo_reference().into();
-                cycle.reply_latency_ns = if answered { latency_ns } else { 0 };
                 if let Some(r) = self.recorder.as_deref_mut() {
                     r.record_egm(&cycle);
                 }
