@@ -297,7 +297,7 @@ pub static FIELDS: &[Field] = &[
             if s.egm.delay_s(s.loop_.period_s) >= -1e-12 { Ok(()) } else { Err(format!("that lag is {} s", fmt_num(own))) }
         },
     ),
-    num("egm.lowpass_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Bandwidth of the position correction's first-order low-pass on the references (ABB's EGM low-pass filter, 20 Hz by default)."),
+    num("egm.lowpass_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Bandwidth of the position correction's first-order low-pass on the references (ABB's EGM low-pass filter; 20 Hz by default here)."),
     num("egm.pos_corr_gain", "", range(lo_in(0.0), hi_in(1.0)), "EGM position-correction gain (ABB's PosCorrGain): 1 follows the position references, 0 only the speed references."),
     num("egm.servo_bandwidth_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Natural frequency of the emulated joint position/velocity servo (with model feed-forward)."),
     num("egm.servo_damping_ratio", "", range(lo_ex(0.0), hi_in(10.0)), "Damping ratio of that servo."),
