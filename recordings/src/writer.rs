@@ -139,10 +139,19 @@ enum Kind {
 struct Slot {
     kind: Kind,
     tick: MaybeUninit<TickHead>,
-    event: MaybeUninit<EventRecord>,
-    egm: MaybeUninit<crate::EgmRecord>,
+    /// An event or an EGM cycle (by `kind`): they share the space, so `/egm` does not make a
+    /// slot larger.
+    small: MaybeUninit<Small>,
     pressure_pa: [MaybeUninit<f32>; MAX_CENTRELINE],
 }
+
+#[derive(Clone, Copy)]
+union Small {
+    event: EventRecord,
+    egm: crate::EgmRecord,
+}
+
+const _: () = assert!(std::mem::size_of::<crate::EgmRecord>() <= std::mem::size_of::<EventRecord>());
 
 #[derive(Default)]
 struct Shared {
@@ -265,8 +274,7 @@ impl Recorder {
         let blank = Slot {
             kind: Kind::Event,
             tick: MaybeUninit::new(TickHead::of(&TickRecord::default())),
-            event: MaybeUninit::new(EventRecord::new(0, 0.0, EventKind::Info, "")),
-            egm: MaybeUninit::new(crate::EgmRecord::default()),
+            small: MaybeUninit::new(Small { event: EventRecord::new(0, 0.0, EventKind::Info, "") }),
             pressure_pa: [MaybeUninit::new(0.0); MAX_CENTRELINE],
         };
         for _ in 0..cfg.queue_capacity {
@@ -348,16 +356,16 @@ impl Recorder {
     #[inline]
     pub fn record_event(&mut self, e: &EventRecord) -> bool {
         // SAFETY (of the write): `slot` points to the slot `push_small` reserved; a Kind::Event
-        // slot is read for `event` only.
-        self.push_small(Kind::Event, |slot| unsafe { std::ptr::addr_of_mut!((*slot).event).write(MaybeUninit::new(*e)) })
+        // slot is read for `small.event` only.
+        self.push_small(Kind::Event, |slot| unsafe { std::ptr::addr_of_mut!((*slot).small).write(MaybeUninit::new(Small { event: *e })) })
     }
 
     /// Queues one EGM cycle (`/egm`; written only when the metadata has [`EGM_METADATA_KEY`]).
     /// Wait-free; returns false (and counts a drop) if the queue is full.
     #[inline]
     pub fn record_egm(&mut self, e: &crate::EgmRecord) -> bool {
-        // SAFETY (of the write): as in record_event; a Kind::Egm slot is read for `egm` only.
-        self.push_small(Kind::Egm, |slot| unsafe { std::ptr::addr_of_mut!((*slot).egm).write(MaybeUninit::new(*e)) })
+        // SAFETY (of the write): as in record_event; a Kind::Egm slot is read for `small.egm` only.
+        self.push_small(Kind::Egm, |slot| unsafe { std::ptr::addr_of_mut!((*slot).small).write(MaybeUninit::new(Small { egm: *e })) })
     }
 
     /// Reserve one slot, mark it `kind`, let `fill` write the field that kind is read for, commit.
@@ -527,9 +535,9 @@ impl WriterThread {
                 Popped::Tick(head)
             }
             // SAFETY: record_event wrote the event.
-            Kind::Event => Popped::Event(unsafe { slot.event.assume_init() }),
+            Kind::Event => Popped::Event(unsafe { slot.small.assume_init().event }),
             // SAFETY: record_egm wrote the cycle.
-            Kind::Egm => Popped::Egm(unsafe { slot.egm.assume_init() }),
+            Kind::Egm => Popped::Egm(unsafe { slot.small.assume_init().egm }),
         };
         chunk.commit_all();
         Some(item)
