@@ -16,8 +16,8 @@
 //! motion controller as a delay `τ` and the position correction's low-pass `ω_c`, the loop is
 //! `L(s) = k_s e^{−sτ} / (b s (1 + s/ω_c))`, `τ = (egm.lag_s − 1/ω_c) + T_c/2` (the motion
 //! controller's delay and servo half-tick, plus the hold of each reference over a cycle). `b`
-//! puts the crossover `ω_x = k_s/b` where the phase margin is `egm.force_phase_margin_deg`:
-//! `ω_x τ + atan(ω_x/ω_c) = 90° − PM`. With the defaults (12 ms lag, 20 Hz, 4 ms, 60°):
+//! puts the crossover `ω_x` (`|L(jω_x)| = 1`: `b = k_s / (ω_x |1 + jω_x/ω_c|)`) where the phase
+//! margin is `egm.force_phase_margin_deg`: `ω_x τ + atan(ω_x/ω_c) = 90° − PM`. With the defaults (12 ms lag, 20 Hz, 4 ms, 60°):
 //! τ = 6.04 ms, crossover 6.1 Hz. `rig design --egm` evaluates the same loop on the reduced
 //! strip model.
 
@@ -74,7 +74,8 @@ impl EgmForceDesign {
             strip_stiffness_n_per_m: k_s,
             delay_s,
             correction_radps: w_c,
-            damping_ns_per_m: k_s / w_x,
+            // |L(jω_x)| = 1 with the low-pass's roll-off: b = k_s / (ω_x |1 + jω_x/ω_c|).
+            damping_ns_per_m: k_s / (w_x * if w_c > 0.0 { (1.0 + (w_x / w_c).powi(2)).sqrt() } else { 1.0 }),
             crossover_hz: w_x / std::f64::consts::TAU,
             phase_margin_deg: 90.0 - lag(w_x).to_degrees(),
         }
@@ -166,5 +167,31 @@ impl EgmForceLaw {
         let q_ref = self.robot.ik_tcp(&target, &seed).unwrap_or(seed);
         self.last_q_ref = Some(q_ref);
         EgmOutput { q_ref, reference: r, force_y_n, pos_cmd_task_m: p }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The rule's loop `k_s e^{−sτ}/(b s (1 + s/ω_c))` evaluated at the crossover it reports:
+    /// unit gain, and the phase margin asked for.
+    #[test]
+    fn the_rules_crossover_has_unit_gain_and_the_asked_phase_margin() {
+        let mut s = Scenario::default();
+        for pm in [45.0, 60.0, 75.0] {
+            s.egm.force_phase_margin_deg = pm;
+            let d = EgmForceDesign::from_scenario(&s);
+            let w = std::f64::consts::TAU * d.crossover_hz;
+            let gain = d.strip_stiffness_n_per_m / (d.damping_ns_per_m * w * (1.0 + (w / d.correction_radps).powi(2)).sqrt());
+            let phase = -90.0 - (w / d.correction_radps).atan().to_degrees() - (w * d.delay_s).to_degrees();
+            assert!((gain - 1.0).abs() < 1e-9, "gain {gain}");
+            assert!((180.0 + phase - pm).abs() < 1e-6, "phase margin {} vs {pm}", 180.0 + phase);
+        }
+        // the defaults: 12 ms lag, 20 Hz, 1 ms ticks, 4 ms cycles
+        s.egm.force_phase_margin_deg = 60.0;
+        let d = EgmForceDesign::from_scenario(&s);
+        let expect_delay = 0.012 - 1.0 / (std::f64::consts::TAU * 20.0) - 0.0005 + 0.0005 + 0.002;
+        assert!((d.delay_s - expect_delay).abs() < 1e-15, "{}", d.delay_s);
     }
 }

@@ -633,6 +633,20 @@ mod tests {
     }
 
     #[test]
+    fn egm_fields_are_checked_against_each_other() {
+        let e = Scenario::from_toml_str("[egm]\nsensor_address = \"localhost\"\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("egm.sensor_address") && e.contains("IP socket address"), "{e}");
+        // 4.5 ms is no whole number of 1 ms ticks
+        let e = Scenario::from_toml_str("[egm]\ncycle_s = 0.0045\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("egm.cycle_s") && e.contains("whole number"), "{e}");
+        // the 20 Hz correction alone lags 7.96 ms, plus the servo's half tick
+        let e = Scenario::from_toml_str("[egm]\nlag_s = 0.008\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("egm.lag_s") && e.contains("that lag is"), "{e}");
+        let s = Scenario::from_toml_str("[egm]\nlag_s = 0.009\n", Path::new("t.toml")).unwrap();
+        assert!((s.egm.delay_s(1e-3) - (0.009 - 1.0 / (std::f64::consts::TAU * 20.0) - 0.0005)).abs() < 1e-15);
+    }
+
+    #[test]
     fn force_table_is_read_and_its_bad_points_are_named() {
         let ok = "[trajectory]\nforce_ref_along_z = [[2, -10], [11, -13.5], [38, -10]]\n";
         let s = Scenario::from_toml_str(ok, Path::new("t.toml")).unwrap();
