@@ -302,7 +302,7 @@ impl EgmLoop<'_> {
             }
             let wake_ns = rt::now_mono_ns();
             let publish_wall_ns = rt::now_wall_ns();
-            let cycle_tick = tick % p.cycle_ticks == 0;
+            let cycle_tick = tick.is_multiple_of(p.cycle_ticks);
             let mut latency_ns = 0u64;
             let mut answered = false;
             // 1. The EGM exchange of this cycle.
@@ -387,7 +387,7 @@ impl EgmLoop<'_> {
             if answered {
                 cycle.reply_latency_ns = latency_ns;
             }
-            let cycle_end = if p.mode == Mode::Lockstep { cycle_tick } else { (tick + 1) % p.cycle_ticks == 0 };
+            let cycle_end = if p.mode == Mode::Lockstep { cycle_tick } else { (tick + 1).is_multiple_of(p.cycle_ticks) };
             if cycle_end && (self.state != SessionState::Stopped || cycle.replies > 0) {
                 cycle.session_state = self.state as u8;
                 cycle.servo_ref_rad = self.servo.servo_reference().into();

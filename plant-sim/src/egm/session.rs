@@ -151,7 +151,8 @@ impl Rules {
             if !(deg[i] >= lo && deg[i] <= hi) {
                 return Err(Refusal::Range { axis: i + 1, deg: deg[i], lo, hi });
             }
-            if !(speed_deg_s[i].abs() <= speed_limit_deg[i].abs()) {
+            // NaN is refused too (it is not within the limit).
+            if speed_deg_s[i].abs().partial_cmp(&speed_limit_deg[i].abs()).is_none_or(|o| o.is_gt()) {
                 return Err(Refusal::SpeedRef { axis: i + 1, deg_s: speed_deg_s[i], limit: speed_limit_deg[i].abs() });
             }
         }
