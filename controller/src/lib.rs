@@ -3,6 +3,7 @@
 //! It links the robot model but never the strip model or the plant.
 
 pub mod daemon;
+pub mod egm_force;
 pub mod gains;
 pub mod law;
 pub mod model;

@@ -6,5 +6,6 @@ fn main() -> anyhow::Result<()> {
         z_a_mm: a.get(2).map_or(20.0, |x| x.parse().unwrap()),
         out: a.get(3).map_or("runs/design".into(), Into::into),
         cache_dir: Some("target/strip-cache".into()),
+        egm: false,
     })
 }

@@ -35,6 +35,10 @@ pub struct DesignArgs {
     /// Strip model cache directory (default: the strip crate's cache directory).
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
+    /// Design the EGM force controller's loop instead (`egm-controller`: admittance behind ABB's
+    /// motion controller, its delay included) and bound its force error over the bulge.
+    #[arg(long)]
+    pub egm: bool,
 }
 
 /// Everything `rig design` computes.
@@ -102,6 +106,13 @@ pub fn run(args: DesignArgs) -> anyhow::Result<()> {
         None => StripModel::load_or_build(&params),
     }
     .context("strip model")?;
+    if args.egm {
+        let r = crate::egm::design_egm(&s, &model, args.z_a_mm * 1e-3);
+        std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+        std::fs::write(args.out.join("design_egm.json"), serde_json::to_string_pretty(&r)?)?;
+        println!("{}", crate::egm::summary_text(&r));
+        return Ok(());
+    }
     let result = design(&s, &model, args.z_a_mm * 1e-3, &args.out)?;
     println!("{}", summary_text(&result));
     Ok(())

@@ -3,6 +3,7 @@
 //! and the acceptance figures measured from recordings ([`metrics`]).
 
 pub mod cli;
+pub mod egm;
 pub mod freq;
 pub mod metrics;
 pub mod plant1;

@@ -95,8 +95,10 @@ impl LiveArgs {
 /// What `rig run` and `rig sweep` start and where they write.
 #[derive(Debug, clap::Args)]
 struct LaunchArgs {
-    /// Controller executable (default: `controller` next to `rig`). Any program that takes
-    /// `--rig NAME --scenario FILE` and speaks the contract of messages/README.md.
+    /// Controller executable (default: `controller` next to `rig`; `egm-controller` for a
+    /// scenario with `[egm] enabled`). Any program that takes `--rig NAME --scenario FILE` and
+    /// speaks the contract of messages/README.md (or EGM). `none` with an EGM scenario: start no
+    /// controller, the plant waits for an external EGM client at `egm.sensor_address`.
     #[arg(long)]
     controller: Option<PathBuf>,
     /// Simulated seconds to run, per case for a sweep (default: the scenario's).
@@ -245,7 +247,9 @@ fn prepare(
     if let Some(l) = &live {
         check_live(l, &parsed, &scenario)?;
     }
-    if let Some(p) = &controller {
+    let no_controller = controller.as_deref() == Some(Path::new("none"));
+    anyhow::ensure!(!no_controller || parsed.egm.enabled, "--controller none needs a scenario with [egm] enabled (an external EGM client answers the plant); {} has none", scenario.display());
+    if let Some(p) = controller.as_ref().filter(|_| !no_controller) {
         check_controller(p)?;
     }
     let lockstep = match mode.as_deref() {
@@ -257,6 +261,7 @@ fn prepare(
     let plant_bin = supervise::sibling_binary("plant-sim")?;
     let controller_bin = match controller {
         Some(p) => p,
+        None if parsed.egm.enabled => supervise::sibling_binary("egm-controller")?,
         None => supervise::sibling_binary("controller")?,
     };
     // The one strip-model cache `rig model build` fills too.
@@ -275,6 +280,7 @@ fn prepare(
         quiet: false,
         live,
         host_probe: false,
+        no_controller,
     })
 }
 

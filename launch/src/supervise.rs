@@ -29,6 +29,9 @@ pub struct RigLaunch {
     pub live: Option<recordings::LiveConfig>,
     /// The plant runs the host-floor probe (`plant-sim --host-probe`): for `rig timing`.
     pub host_probe: bool,
+    /// `--controller none` (EGM scenarios): start no controller, the plant waits for an external
+    /// EGM client at the scenario's sensor address.
+    pub no_controller: bool,
 }
 
 /// How a supervised run ended.
@@ -265,6 +268,9 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
         s
     });
 
+    if l.no_controller {
+        return finish(plant_alone(&mut plant).await?, reader, false, false).await;
+    }
     let mut ctrl_cmd = Command::new(&l.controller_bin);
     ctrl_cmd.arg("--rig").arg(&l.rig).arg("--scenario").arg(&l.scenario).stdout(Stdio::inherit()).stderr(Stdio::inherit());
     if quiet {
@@ -354,6 +360,26 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
         }
     };
     finish(ending, reader, controller_exited_first, plant_told).await
+}
+
+/// `--controller none`: only the plant to supervise (an EGM client outside the rig answers it).
+async fn plant_alone(plant: &mut Child) -> anyhow::Result<Ending> {
+    let mut sigint = signal(SignalKind::interrupt())?;
+    let mut sigterm = signal(SignalKind::terminate())?;
+    Ok(tokio::select! {
+        s = plant.wait() => {
+            let s = s?;
+            if s.success() { Ending::Completed } else { Ending::PlantFailed(format!("plant-sim {}", ended(s))) }
+        }
+        _ = sigint.recv() => {
+            stop(plant, Duration::from_secs(10)).await;
+            Ending::Interrupted
+        }
+        _ = sigterm.recv() => {
+            stop(plant, Duration::from_secs(10)).await;
+            Ending::Terminated
+        }
+    })
 }
 
 /// The outcome with the plant's summary line, once its stdout is read to the end.

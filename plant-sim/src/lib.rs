@@ -5,6 +5,7 @@
 
 pub mod arbiter;
 pub mod contact;
+pub mod egm;
 pub mod gate;
 pub mod histogram;
 pub mod launcher;

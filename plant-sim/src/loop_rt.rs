@@ -81,17 +81,45 @@ pub struct LoopStats {
     pub controller_ended: bool,
 }
 
+impl LoopStats {
+    /// A run's statistics before its first tick.
+    pub fn empty() -> LoopStats {
+        LoopStats {
+            ticks: 0,
+            misses: 0,
+            safe_stops: 0,
+            refusals: 0,
+            overruns: 0,
+            round_trip: Histogram::for_latency(),
+            jitter: Histogram::for_latency(),
+            plant_compute: Histogram::for_latency(),
+            controller_compute: Histogram::for_latency(),
+            wall_s: 0.0,
+            sim_s: 0.0,
+            active_wall_s: 0.0,
+            active_sim_s: 0.0,
+            stopped_by_signal: false,
+            reflexes: 0,
+            foreign_answers: 0,
+            first_safe_stop_tick: None,
+            first_reflex_tick: None,
+            first_refusal_tick: None,
+            controller_ended: false,
+        }
+    }
+}
+
 /// A short text on the stack for rare events (no heap allocation).
-struct StackText {
+pub(crate) struct StackText {
     buf: [u8; 192],
     len: usize,
 }
 
 impl StackText {
-    fn new() -> Self {
+    pub(crate) fn new() -> Self {
         StackText { buf: [0; 192], len: 0 }
     }
-    fn as_str(&self) -> &str {
+    pub(crate) fn as_str(&self) -> &str {
         std::str::from_utf8(&self.buf[..self.len]).unwrap_or("")
     }
 }
@@ -334,28 +362,7 @@ impl PlantLoop<'_> {
     /// Run until `n_ticks` ticks are integrated or a stop signal arrives.
     pub fn run(&mut self) -> LoopStats {
         let p = self.params;
-        let mut stats = LoopStats {
-            ticks: 0,
-            misses: 0,
-            safe_stops: 0,
-            refusals: 0,
-            overruns: 0,
-            round_trip: Histogram::for_latency(),
-            jitter: Histogram::for_latency(),
-            plant_compute: Histogram::for_latency(),
-            controller_compute: Histogram::for_latency(),
-            wall_s: 0.0,
-            sim_s: 0.0,
-            active_wall_s: 0.0,
-            active_sim_s: 0.0,
-            stopped_by_signal: false,
-            reflexes: 0,
-            foreign_answers: 0,
-            first_safe_stop_tick: None,
-            first_reflex_tick: None,
-            first_refusal_tick: None,
-            controller_ended: false,
-        };
+        let mut stats = LoopStats::empty();
         let mut answers = Answers::default();
         let mut in_end_stop: Option<usize> = None;
         let mut gone_reported = false;

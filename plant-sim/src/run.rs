@@ -63,6 +63,8 @@ pub struct RunSummary {
     pub live: Option<(std::net::SocketAddr, recordings::LiveSummary)>,
     /// What the host-floor probe measured, per CPU (None: it did not run).
     pub probe: Option<Vec<crate::probe::CpuReport>>,
+    /// The EGM counters, when the scenario's `[egm]` is enabled.
+    pub egm: Option<crate::egm::EgmStats>,
 }
 
 impl RunSummary {
@@ -104,6 +106,12 @@ impl RunSummary {
             "host_probe": self.probe.as_ref().map(|cpus| serde_json::json!({
                 "stall_threshold_us": crate::probe::HOST_STALL_NS as f64 * 1e-3,
                 "cpus": cpus.iter().map(|c| c.to_json(&edges)).collect::<Vec<_>>(),
+            })),
+            "egm": self.egm.map(|e| serde_json::json!({
+                "accepted": e.accepted,
+                "refused": e.refused,
+                "cycles": e.cycles,
+                "session_ended_tick": e.session_ended_tick,
             })),
         })
     }
@@ -191,6 +199,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
                 ("substeps".to_string(), l.substeps.to_string()),
                 ("integrator".to_string(), l.integrator.name().to_string()),
             ];
+            if scenario.egm.enabled {
+                let lag = crate::egm::servo::ServoParams::from_scenario(&scenario).lag_s();
+                metadata.push((crate::recording::EGM_METADATA_KEY.to_string(), lag.to_string()));
+            }
             // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
             if let Some(c) = physics.contact() {
                 metadata.push(("centreline_z_m".to_string(), format!("{:?}", c.centreline_z_m())));
@@ -265,19 +277,29 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         }
         _ => None,
     };
-    let stats = PlantLoop {
-        ports: &ports,
-        physics: &mut physics,
-        gate: &mut gate,
-        recorder: recorder.as_mut(),
-        params,
-        last_log_tick: None,
-        arbiter: &mut arbiter,
-        watch: Some(&watch),
-        reflex_limits: crate::limits::ReflexLimits::from_scenario(&scenario),
-        probe: probe.as_ref().map(|p| &*p.latest),
-    }
-    .run();
+    // [egm] enabled: the plant is an ABB robot controller speaking EGM over UDP (`egm/`),
+    // instead of taking torques over iceoryx2.
+    let (stats, egm) = if scenario.egm.enabled {
+        let ep = crate::egm::EgmParams::from_scenario(&scenario, mode, params.n_ticks)?;
+        tracing::info!(sensor = %ep.sensor, "EGM: sending EgmRobot every {} s", scenario.egm.cycle_s);
+        let (stats, es) = crate::egm::EgmLoop::new(&scenario, &mut physics, recorder.as_mut(), ep)?.run();
+        (stats, Some(es))
+    } else {
+        let stats = PlantLoop {
+            ports: &ports,
+            physics: &mut physics,
+            gate: &mut gate,
+            recorder: recorder.as_mut(),
+            params,
+            last_log_tick: None,
+            arbiter: &mut arbiter,
+            watch: Some(&watch),
+            reflex_limits: crate::limits::ReflexLimits::from_scenario(&scenario),
+            probe: probe.as_ref().map(|p| &*p.latest),
+        }
+        .run();
+        (stats, None)
+    };
     let probe = probe.map(crate::probe::Probe::finish);
     if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone()) {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
@@ -292,7 +314,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         None => (None, None),
     };
     tracing::info!(ticks = stats.ticks, misses = stats.misses, safe_stops = stats.safe_stops, "plant stopped");
-    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live, probe })
+    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live, probe, egm })
 }
 
 /// What the recording's Foxglove channels draw: the scenario's tool and placement, and the strip

@@ -29,7 +29,7 @@ pub mod tmpfs_test;
 mod writer;
 
 pub use live::{LiveConfig, LiveSummary};
-pub use writer::{Recorder, RecorderConfig, RecorderError, RecorderTuning, RecordingSummary};
+pub use writer::{Recorder, RecorderConfig, RecorderError, RecorderTuning, RecordingSummary, EGM_METADATA_KEY};
 
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, DOF};
 
@@ -204,10 +204,14 @@ pub enum EventKind {
     ForeignTorque = 14,
     /// The controller process ended (reported by the launcher) or its node was found dead.
     ControllerEnded = 15,
+    /// The EGM session started (first valid sensor message) or ended (comm_timeout, reflex).
+    EgmSession = 16,
+    /// An `EgmSensor` message was refused (sequence number, joint or speed limits, malformed).
+    EgmRefused = 17,
 }
 
 impl EventKind {
-    pub const ALL: [EventKind; 16] = [
+    pub const ALL: [EventKind; 18] = [
         Self::Start,
         Self::Stop,
         Self::ModeChange,
@@ -224,6 +228,8 @@ impl EventKind {
         Self::EndStop,
         Self::ForeignTorque,
         Self::ControllerEnded,
+        Self::EgmSession,
+        Self::EgmRefused,
     ];
 
     pub fn from_u8(v: u8) -> Option<Self> {
@@ -249,8 +255,36 @@ impl EventKind {
             Self::EndStop => "end_stop",
             Self::ForeignTorque => "foreign_torque",
             Self::ControllerEnded => "controller_ended",
+            Self::EgmSession => "egm_session",
+            Self::EgmRefused => "egm_refused",
         }
     }
+}
+
+/// One EGM cycle of a plant acting as the ABB robot controller (`/egm`, `plant-sim/src/egm`).
+/// Angles in ABB's axis convention and degrees where the name says `_deg`, DH rad otherwise.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EgmRecord {
+    pub tick: u64,
+    pub sim_time_s: f64,
+    /// `header.seqno` of the EgmRobot sent this cycle.
+    pub robot_seqno: u32,
+    /// `header.seqno` of the last accepted EgmSensor (0 before any).
+    pub sensor_seqno: u32,
+    /// 0 waiting for the sensor, 1 running, 2 stopped.
+    pub session_state: u8,
+    /// Sensor messages this cycle: taken in all, of them accepted.
+    pub replies: u32,
+    pub accepted: u32,
+    /// The reference in force (last accepted), as received.
+    pub joints_ref_deg: [f64; 6],
+    pub speed_ref_deg_s: [f64; 6],
+    /// The emulated motion controller's servo reference now (after delay and correction), rad.
+    pub servo_ref_rad: [f64; 6],
+    /// Send → reply taken, ns (0 without a reply this cycle): the sensor's measured lag.
+    pub reply_latency_ns: u64,
+    /// The motion controller's lag from a reference to the joints, s (its configuration).
+    pub servo_lag_s: f64,
 }
 
 /// Longest event text kept; longer texts are cut at a character boundary.

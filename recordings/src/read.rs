@@ -132,6 +132,8 @@ pub struct Recording {
     pub controller: Vec<ControllerDiagnostics>,
     pub timing: Vec<TimingRow>,
     pub events: Vec<EventRow>,
+    /// `/egm`, one row per EGM cycle (EGM runs only).
+    pub egm: Vec<crate::EgmRecord>,
     /// Log time (Unix ns: the run's wall-clock start + simulated time) of each `joint_state` row.
     pub log_time_ns: Vec<u64>,
     /// z of the centre-line nodes as the first `/strip` message carrying them has it, m.
@@ -325,7 +327,8 @@ impl Recording {
             }
             4 => self.controller.push(schema::decode_controller(data).map_err(bad)?),
             5 => self.timing.push(schema::decode_timing(data).map_err(bad)?),
-            _ => self.events.push(schema::decode_event(data, m.publish_time).map_err(bad)?),
+            6 => self.events.push(schema::decode_event(data, m.publish_time).map_err(bad)?),
+            _ => self.egm.push(schema::decode_egm(data).map_err(bad)?),
         }
         Ok(())
     }

@@ -215,15 +215,24 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
     }
 }
 
+/// The constant force set-point of an EGM run's scenario (`[egm] enabled`, no force table), N.
+fn egm_force_ref(rec: &Recording) -> Option<f64> {
+    let s: scenario::Scenario = toml::from_str(rec.rig_metadata("scenario_toml")?).ok()?;
+    (s.egm.enabled && s.trajectory.force_ref_along_z.is_empty()).then_some(s.trajectory.force_ref_n)
+}
+
 fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
     let roll = rolling_ticks(rec);
     if roll.is_empty() {
         return None;
     }
     let ctrl = rec.controller_by_tick();
+    // An EGM run has no controller diagnostics (EGM carries no force reference back): its
+    // set-point is the scenario's constant `trajectory.force_ref_n` (none with a table).
+    let egm_ref = if rec.controller.is_empty() { egm_force_ref(rec) } else { None };
     let errors: Vec<f64> = roll
         .iter()
-        .filter_map(|&i| ctrl[i].map(|c| rec.strip[i].bottom_force_n.abs() - rec.controller[c].force_ref_n.abs()))
+        .filter_map(|&i| ctrl[i].map(|c| rec.controller[c].force_ref_n).or(egm_ref).map(|r| rec.strip[i].bottom_force_n.abs() - r.abs()))
         .collect();
     let n_err = errors.len() as f64;
     let (max_abs, rms, mean) = if errors.is_empty() {

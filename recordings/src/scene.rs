@@ -336,8 +336,8 @@ pub fn log_level(kind: EventKind) -> log::Level {
     use EventKind::*;
     match kind {
         Fault | RecordingError | VersionMismatch | TorqueRefused | ControllerEnded => log::Level::Error,
-        SafeStop | Reflex | EndStop | Miss | ForeignTorque => log::Level::Warning,
-        Start | Stop | ModeChange | ControllerChange | SafeStopCleared | Info => log::Level::Info,
+        SafeStop | Reflex | EndStop | Miss | ForeignTorque | EgmRefused => log::Level::Warning,
+        Start | Stop | ModeChange | ControllerChange | SafeStopCleared | Info | EgmSession => log::Level::Info,
     }
 }
 

@@ -6,7 +6,7 @@
 //! time is the same.
 
 use crate::cdr::{CdrError, CdrReader, CdrWriter};
-use crate::{ControllerStamps, EventKind, EventRecord, StageStamps, TickRecord, TimingRecord, MAX_CENTRELINE};
+use crate::{ControllerStamps, EgmRecord, EventKind, EventRecord, StageStamps, TickRecord, TimingRecord, MAX_CENTRELINE};
 
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, CONTRACT_VERSION};
 
@@ -188,6 +188,8 @@ uint8 KIND_REFLEX=12
 uint8 KIND_END_STOP=13
 uint8 KIND_FOREIGN_TORQUE=14
 uint8 KIND_CONTROLLER_ENDED=15
+uint8 KIND_EGM_SESSION=16
+uint8 KIND_EGM_REFUSED=17
 uint64 tick
 float64 sim_time                # s
 uint8 kind                      # KIND_*
@@ -196,8 +198,32 @@ string text
 ",
 };
 
+pub const EGM: ChannelDef = ChannelDef {
+    topic: "/egm",
+    schema_name: "rig_msgs/msg/EgmCycle",
+    schema_text: "\
+# One EGM cycle of the plant acting as the ABB robot controller (only in EGM runs).
+# Angles: ABB axis convention in degrees where the name ends in _deg, DH joints in rad otherwise.
+uint8 SESSION_WAITING=0
+uint8 SESSION_RUNNING=1
+uint8 SESSION_STOPPED=2
+uint64 tick
+float64 sim_time                # s
+uint32 robot_seqno              # header.seqno of the EgmRobot sent this cycle
+uint32 sensor_seqno             # header.seqno of the last accepted EgmSensor (0 before any)
+uint8 session_state             # SESSION_*
+uint32 replies                  # EgmSensor messages taken this cycle
+uint32 accepted                 # of them accepted (the others are in /events)
+float64[6] joints_ref_deg       # reference in force, as received
+float64[6] speed_ref_deg_s      # speed reference in force, as received (0 if none)
+float64[6] servo_ref            # rad, the motion controller's servo reference now
+uint64 reply_latency_ns         # ns, EgmRobot sent -> reply taken (0 without a reply)
+float64 servo_lag               # s, the motion controller's lag from reference to joints
+",
+};
+
 /// All channels, in the order the writer registers them.
-pub const CHANNELS: [ChannelDef; 7] = [JOINT_STATE, JOINT_TORQUE, WRENCH, STRIP, CONTROLLER, TIMING, EVENTS];
+pub const CHANNELS: [ChannelDef; 8] = [JOINT_STATE, JOINT_TORQUE, WRENCH, STRIP, CONTROLLER, TIMING, EVENTS, EGM];
 
 // ---------------------------------------------------------------------------------------------
 // Encoders (writer thread).
@@ -370,6 +396,40 @@ pub fn encode_event(buf: &mut Vec<u8>, e: &EventRecord) {
     w.u8(e.kind as u8);
     w.string(e.kind.name());
     w.string(e.text());
+}
+
+pub fn encode_egm(buf: &mut Vec<u8>, e: &EgmRecord) {
+    let mut w = CdrWriter::new(buf);
+    w.u64(e.tick);
+    w.f64(e.sim_time_s);
+    w.u32(e.robot_seqno);
+    w.u32(e.sensor_seqno);
+    w.u8(e.session_state);
+    w.u32(e.replies);
+    w.u32(e.accepted);
+    w.f64_array(&e.joints_ref_deg);
+    w.f64_array(&e.speed_ref_deg_s);
+    w.f64_array(&e.servo_ref_rad);
+    w.u64(e.reply_latency_ns);
+    w.f64(e.servo_lag_s);
+}
+
+pub fn decode_egm(msg: &[u8]) -> Result<EgmRecord, CdrError> {
+    let mut r = CdrReader::new(msg)?;
+    Ok(EgmRecord {
+        tick: r.u64("tick")?,
+        sim_time_s: r.f64("sim_time")?,
+        robot_seqno: r.u32("robot_seqno")?,
+        sensor_seqno: r.u32("sensor_seqno")?,
+        session_state: r.u8("session_state")?,
+        replies: r.u32("replies")?,
+        accepted: r.u32("accepted")?,
+        joints_ref_deg: r.f64_array("joints_ref_deg")?,
+        speed_ref_deg_s: r.f64_array("speed_ref_deg_s")?,
+        servo_ref_rad: r.f64_array("servo_ref")?,
+        reply_latency_ns: r.u64("reply_latency_ns")?,
+        servo_lag_s: r.f64("servo_lag")?,
+    })
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -138,10 +138,15 @@ pub struct RecordingSummary {
     pub live: Option<LiveSummary>,
 }
 
+/// The metadata key of an EGM run (its value: the motion controller's lag, s); with it the
+/// recording has the `/egm` channel.
+pub const EGM_METADATA_KEY: &str = "egm_servo_lag_s";
+
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Kind {
     Tick,
     Event,
+    Egm,
 }
 
 /// One queue slot, written in place by the loop thread: the kind, then either the tick head and
@@ -152,10 +157,20 @@ enum Kind {
 struct Slot {
     kind: Kind,
     tick: MaybeUninit<TickHead>,
-    event: MaybeUninit<EventRecord>,
+    /// An event or an EGM cycle (by `kind`): they share the space, so `/egm` does not make a
+    /// slot larger.
+    small: MaybeUninit<Small>,
     pressure_pa: [MaybeUninit<f32>; MAX_CENTRELINE],
     top_uy_m: [MaybeUninit<f32>; MAX_CENTRELINE],
 }
+
+#[derive(Clone, Copy)]
+union Small {
+    event: EventRecord,
+    egm: crate::EgmRecord,
+}
+
+const _: () = assert!(std::mem::size_of::<crate::EgmRecord>() <= std::mem::size_of::<EventRecord>());
 
 #[derive(Default)]
 struct Shared {
@@ -287,7 +302,10 @@ impl Recorder {
             .create(BufWriter::with_capacity(WRITE_SLICE_BYTES, SlicedFile(file, tally.clone())))
             .map_err(mcap_err)?;
         let mut channel_ids = [0u16; CHANNELS.len()];
-        for (id, ch) in channel_ids.iter_mut().zip(CHANNELS.iter()) {
+        // `/egm` only in EGM runs (the plant names its servo lag in the metadata): a torque run's
+        // file is as before.
+        let has_egm = cfg.metadata.iter().any(|(k, _)| k == EGM_METADATA_KEY);
+        for (id, ch) in channel_ids.iter_mut().zip(CHANNELS.iter()).filter(|(_, ch)| has_egm || ch.topic != schema::EGM.topic) {
             let schema_id = mcap.add_schema(ch.schema_name, SCHEMA_ENCODING, ch.schema_text.as_bytes()).map_err(mcap_err)?;
             *id = mcap.add_channel(schema_id, ch.topic, MESSAGE_ENCODING, &BTreeMap::new()).map_err(mcap_err)?;
         }
@@ -323,7 +341,7 @@ impl Recorder {
         let blank = Slot {
             kind: Kind::Event,
             tick: MaybeUninit::new(TickHead::of(&TickRecord::default())),
-            event: MaybeUninit::new(EventRecord::new(0, 0.0, EventKind::Info, "")),
+            small: MaybeUninit::new(Small { event: EventRecord::new(0, 0.0, EventKind::Info, "") }),
             pressure_pa: [MaybeUninit::new(0.0); MAX_CENTRELINE],
             top_uy_m: [MaybeUninit::new(0.0); MAX_CENTRELINE],
         };
@@ -337,6 +355,7 @@ impl Recorder {
         let mut writer = WriterThread {
             mcap: Some(mcap),
             channel_ids,
+            has_egm,
             buf: Vec::with_capacity(4096),
             centreline_z,
             pressure: Vec::with_capacity(MAX_CENTRELINE),
@@ -417,16 +436,33 @@ impl Recorder {
     /// Queues one event. Wait-free; returns false (and counts a drop) if the queue is full.
     #[inline]
     pub fn record_event(&mut self, e: &EventRecord) -> bool {
+        // SAFETY (of the write): `slot` points to the slot `push_small` reserved; a Kind::Event
+        // slot is read for `small.event` only.
+        self.push_small(Kind::Event, |slot| unsafe { std::ptr::addr_of_mut!((*slot).small).write(MaybeUninit::new(Small { event: *e })) })
+    }
+
+    /// Queues one EGM cycle (`/egm`; written only when the metadata has [`EGM_METADATA_KEY`]).
+    /// Wait-free; returns false (and counts a drop) if the queue is full.
+    #[inline]
+    pub fn record_egm(&mut self, e: &crate::EgmRecord) -> bool {
+        // SAFETY (of the write): as in record_event; a Kind::Egm slot is read for `small.egm` only.
+        self.push_small(Kind::Egm, |slot| unsafe { std::ptr::addr_of_mut!((*slot).small).write(MaybeUninit::new(Small { egm: *e })) })
+    }
+
+    /// Reserve one slot, mark it `kind`, let `fill` write the field that kind is read for, commit.
+    #[inline]
+    fn push_small(&mut self, kind: Kind, fill: impl FnOnce(*mut Slot)) -> bool {
         let Some(p) = self.producer.as_mut() else { return false };
         let Ok(mut chunk) = p.write_chunk_uninit(1) else {
             self.shared.dropped_events.fetch_add(1, Ordering::Relaxed);
             return false;
         };
         let slot = chunk.as_mut_slices().0[0].as_mut_ptr();
-        // SAFETY: as in record_tick; a Kind::Event slot is read for `event` only.
+        // SAFETY: as in record_tick: `kind` first (the only field without MaybeUninit), then the
+        // kind's field by `fill`; the reader reads exactly that.
         unsafe {
-            std::ptr::addr_of_mut!((*slot).kind).write(Kind::Event);
-            std::ptr::addr_of_mut!((*slot).event).write(MaybeUninit::new(*e));
+            std::ptr::addr_of_mut!((*slot).kind).write(kind);
+            fill(slot);
             chunk.commit(1);
         }
         true
@@ -486,11 +522,14 @@ impl Drop for Recorder {
 enum Popped {
     Tick(TickHead),
     Event(EventRecord),
+    Egm(crate::EgmRecord),
 }
 
 struct WriterThread {
     mcap: Option<McapFile>,
     channel_ids: [u16; CHANNELS.len()],
+    /// The `/egm` channel is registered (an EGM run).
+    has_egm: bool,
     buf: Vec<u8>,
     centreline_z: Vec<f32>,
     /// Centre-line pressures of the tick being written.
@@ -601,7 +640,9 @@ impl WriterThread {
                 Popped::Tick(head)
             }
             // SAFETY: record_event wrote the event.
-            Kind::Event => Popped::Event(unsafe { slot.event.assume_init() }),
+            Kind::Event => Popped::Event(unsafe { slot.small.assume_init().event }),
+            // SAFETY: record_egm wrote the cycle.
+            Kind::Egm => Popped::Egm(unsafe { slot.small.assume_init().egm }),
         };
         chunk.commit_all();
         Some(item)
@@ -615,6 +656,7 @@ impl WriterThread {
         let res = match &item {
             Popped::Tick(r) => self.write_tick(r),
             Popped::Event(e) => self.write_event(e),
+            Popped::Egm(e) => self.write_egm(e),
         };
         if let Err(e) = res {
             self.fail(&e);
@@ -656,6 +698,16 @@ impl WriterThread {
         self.last_tick = r.state.tick;
         self.last_sim_time_s = r.state.sim_time_s;
         Ok(())
+    }
+
+    fn write_egm(&mut self, e: &crate::EgmRecord) -> Result<(), mcap::McapError> {
+        if !self.has_egm {
+            return Ok(());
+        }
+        schema::encode_egm(&mut self.buf, e);
+        self.bytes_since_flush += self.buf.len() as u64 + 31;
+        let header = MessageHeader { channel_id: self.channel_ids[7], sequence: e.tick as u32, log_time: sim_time_ns(e.sim_time_s), publish_time: wall_clock_ns() };
+        self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)
     }
 
     fn write_event(&mut self, e: &EventRecord) -> Result<(), mcap::McapError> {

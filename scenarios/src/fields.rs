@@ -274,6 +274,35 @@ pub static FIELDS: &[Field] = &[
     // [safety]
     num("safety.max_tcp_speed_mps", "m/s", POSITIVE, "Reflex: TCP speed limit (ISO 10218-1's reduced speed, 0.25 m/s, by default); crossing it stops the plant at once."),
     num("safety.max_contact_force_n", "N", POSITIVE, "Reflex: limit on the magnitude of the wheel–strip force; crossing it stops the plant at once."),
+    // [egm]
+    flag("egm.enabled", "Make the plant an ABB robot controller speaking EGM (UDP, protobuf) to the sensor at `egm.sensor_address` instead of taking joint torques over iceoryx2."),
+    with_rule(
+        Field { key: "egm.sensor_address", kind: Kind::Text, unit: "", range: ANY, rule: None, meaning: "UDP address `host:port` of the EGM sensor (the client program: it binds this port, the plant sends `EgmRobot` there)." },
+        "an IP socket address such as 127.0.0.1:6510",
+        |s| s.egm.sensor_address.parse::<std::net::SocketAddr>().map(|_| ()).map_err(|e| e.to_string()),
+    ),
+    with_rule(
+        num("egm.cycle_s", "s", range(lo_ex(0.0), hi_in(0.1)), "EGM cycle: one `EgmRobot` sent and one `EgmSensor` taken per cycle (ABB: typically 4 ms)."),
+        "a whole number of loop.period_s",
+        |s| {
+            let n = s.egm.cycle_s / s.loop_.period_s;
+            if n >= 1.0 && (n - n.round()).abs() < 1e-9 { Ok(()) } else { Err(format!("the period is {} s", fmt_num(s.loop_.period_s))) }
+        },
+    ),
+    num("egm.comm_timeout_s", "s", range(of(1.0, "egm.cycle_s", false), hi_in(3600.0)), "No valid sensor message for this long ends the EGM session: the robot holds its position, an `/events` entry says why (ABB's CommTimeout)."),
+    with_rule(
+        num("egm.lag_s", "s", range(lo_in(0.0), hi_in(1.0)), "Total lag of the emulated motion controller: from a joint reference to the joint following it on a ramp (pure delay, the position correction's low-pass and the joint servo's half tick; 12 ms default)."),
+        "at least the position correction's own lag 1/(egm.pos_corr_gain 2π egm.lowpass_hz) plus half of loop.period_s (the joint servo's)",
+        |s| {
+            let own = s.egm.lag_s - s.egm.delay_s(s.loop_.period_s);
+            if s.egm.delay_s(s.loop_.period_s) >= -1e-12 { Ok(()) } else { Err(format!("that lag is {} s", fmt_num(own))) }
+        },
+    ),
+    num("egm.lowpass_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Bandwidth of the position correction's first-order low-pass on the references (ABB's EGM low-pass filter; 20 Hz by default here)."),
+    num("egm.pos_corr_gain", "", range(lo_in(0.0), hi_in(1.0)), "EGM position-correction gain (ABB's PosCorrGain): 1 follows the position references, 0 only the speed references."),
+    num("egm.servo_bandwidth_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Natural frequency of the emulated joint position/velocity servo (with model feed-forward)."),
+    num("egm.servo_damping_ratio", "", range(lo_ex(0.0), hi_in(10.0)), "Damping ratio of that servo."),
+    num("egm.force_phase_margin_deg", "°", range(lo_ex(0.0), hi_ex(90.0)), "The EGM force controller (`egm-controller`): phase margin its admittance is designed for, with the motion controller's delay and low-pass in the loop."),
 ];
 
 /// The field called `key` (`section.field`).

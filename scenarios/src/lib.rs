@@ -139,6 +139,8 @@ pub struct Scenario {
     pub controller: ControllerConfig,
     pub recording: RecordingConfig,
     pub safety: SafetyConfig,
+    /// ABB Externally Guided Motion: the plant acts as the robot controller (off by default).
+    pub egm: EgmConfig,
 }
 
 /// Reflex limits of the plant (DESIGN section 10): crossing one puts the plant into safe stop at
@@ -156,6 +158,69 @@ pub struct SafetyConfig {
 impl Default for SafetyConfig {
     fn default() -> Self {
         Self { max_tcp_speed_mps: 0.25, max_contact_force_n: 40.0 }
+    }
+}
+
+/// ABB Externally Guided Motion (DESIGN section 11): with `enabled`, `plant-sim` acts as the
+/// IRB 2400's controller. Every `cycle_s` it sends `EgmRobot` to the sensor at `sensor_address`
+/// and takes its `EgmSensor` joint references; an emulated motion controller (reference delay,
+/// position correction with a low-pass, joint servo with model feed-forward) turns them into the
+/// torques the plant integrates. Defaults and their reasons: `plant-sim/README.md`, "EGM".
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EgmConfig {
+    pub enabled: bool,
+    /// UDP address of the EGM sensor (the client program), `host:port`.
+    pub sensor_address: String,
+    /// EGM cycle, s: one `EgmRobot` and one `EgmSensor` per cycle (ABB: typically 4 ms).
+    pub cycle_s: f64,
+    /// No valid sensor message for this long ends the EGM session (the robot holds), s.
+    pub comm_timeout_s: f64,
+    /// Total lag from a sensor's joint reference to the joint following it on a ramp, s.
+    pub lag_s: f64,
+    /// Bandwidth of the position correction's first-order low-pass on the references, Hz.
+    pub lowpass_hz: f64,
+    /// EGM position-correction gain (ABB's `\PosCorrGain`, 0..1): 1 follows the position
+    /// references, 0 only the speed references.
+    pub pos_corr_gain: f64,
+    /// Joint servo: natural frequency of the joint position/velocity loop, Hz.
+    pub servo_bandwidth_hz: f64,
+    /// Joint servo: damping ratio.
+    pub servo_damping_ratio: f64,
+    /// The EGM force controller's design target: phase margin of its force loop, degrees.
+    pub force_phase_margin_deg: f64,
+}
+
+impl Default for EgmConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            sensor_address: "127.0.0.1:6510".into(),
+            cycle_s: 0.004,
+            comm_timeout_s: 1.0,
+            lag_s: 0.012,
+            lowpass_hz: 20.0,
+            pos_corr_gain: 1.0,
+            servo_bandwidth_hz: 30.0,
+            servo_damping_ratio: 1.0,
+            force_phase_margin_deg: 60.0,
+        }
+    }
+}
+
+impl EgmConfig {
+    /// Ramp lag of the position correction, s: `1 / (pos_corr_gain 2π lowpass_hz)` (infinite at
+    /// gain 0, where only speed references move the robot).
+    pub fn correction_lag_s(&self) -> f64 {
+        1.0 / (self.pos_corr_gain * 2.0 * std::f64::consts::PI * self.lowpass_hz)
+    }
+
+    /// The pure delay in front of the correction, s: the total lag less the correction's and
+    /// less half a control period (the joint servo's torque is held over a tick, so the joint
+    /// follows its reference half a tick behind). Gain 0: no correction lag.
+    pub fn delay_s(&self, period_s: f64) -> f64 {
+        let correction = if self.pos_corr_gain > 0.0 { self.correction_lag_s() } else { 0.0 };
+        self.lag_s - correction - 0.5 * period_s
     }
 }
 
@@ -568,6 +633,20 @@ mod tests {
         let text = "[strip]\nboundary = \"glued\"\n";
         let e = Scenario::from_toml_str(text, Path::new("t.toml")).unwrap_err().to_string();
         assert!(e.contains("strip.boundary") && e.contains("glued"), "{e}");
+    }
+
+    #[test]
+    fn egm_fields_are_checked_against_each_other() {
+        let e = Scenario::from_toml_str("[egm]\nsensor_address = \"localhost\"\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("egm.sensor_address") && e.contains("IP socket address"), "{e}");
+        // 4.5 ms is no whole number of 1 ms ticks
+        let e = Scenario::from_toml_str("[egm]\ncycle_s = 0.0045\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("egm.cycle_s") && e.contains("whole number"), "{e}");
+        // the 20 Hz correction alone lags 7.96 ms, plus the servo's half tick
+        let e = Scenario::from_toml_str("[egm]\nlag_s = 0.008\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains("egm.lag_s") && e.contains("that lag is"), "{e}");
+        let s = Scenario::from_toml_str("[egm]\nlag_s = 0.009\n", Path::new("t.toml")).unwrap();
+        assert!((s.egm.delay_s(1e-3) - (0.009 - 1.0 / (std::f64::consts::TAU * 20.0) - 0.0005)).abs() < 1e-15);
     }
 
     #[test]
