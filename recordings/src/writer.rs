@@ -257,11 +257,16 @@ impl Recorder {
             None => Vec::new(),
         };
         let fox_defs = FoxgloveChannels::defs(cfg.scene.as_ref());
+        // `/egm` only in EGM runs (the plant names its servo lag in the metadata): a torque run's
+        // file and live view stay as they were. `/egm` is the last of CHANNELS, so the others keep
+        // their index in both.
+        let has_egm = cfg.metadata.iter().any(|(k, _)| k == EGM_METADATA_KEY);
+        let ros_channels = if has_egm { CHANNELS.len() } else { CHANNELS.len() - 1 };
         // The live view first: an address it cannot serve on ends the start before a file exists.
         let live = match &cfg.live {
             Some(live_cfg) => {
                 let name = cfg.metadata.iter().find(|(k, _)| k == "rig").map_or("rig", |(_, v)| v.as_str());
-                let ros = CHANNELS.iter().map(|ch| LiveChannel {
+                let ros = CHANNELS[..ros_channels].iter().map(|ch| LiveChannel {
                     topic: ch.topic,
                     schema_name: ch.schema_name,
                     schema_encoding: SCHEMA_ENCODING,
@@ -304,12 +309,11 @@ impl Recorder {
         let mut channel_ids = [0u16; CHANNELS.len()];
         // `/egm` only in EGM runs (the plant names its servo lag in the metadata): a torque run's
         // file is as before.
-        let has_egm = cfg.metadata.iter().any(|(k, _)| k == EGM_METADATA_KEY);
         for (id, ch) in channel_ids.iter_mut().zip(CHANNELS.iter()).filter(|(_, ch)| has_egm || ch.topic != schema::EGM.topic) {
             let schema_id = mcap.add_schema(ch.schema_name, SCHEMA_ENCODING, ch.schema_text.as_bytes()).map_err(mcap_err)?;
             *id = mcap.add_channel(schema_id, ch.topic, MESSAGE_ENCODING, &BTreeMap::new()).map_err(mcap_err)?;
         }
-        let fox = FoxgloveChannels::register(&mut mcap, &fox_defs).map_err(mcap_err)?;
+        let fox = FoxgloveChannels::register(&mut mcap, &fox_defs, ros_channels).map_err(mcap_err)?;
         // The run's wall-clock start, taken once: log time = start + simulated time.
         let start_ns = wall_clock_ns();
         let mut meta: BTreeMap<String, String> = cfg.metadata.iter().cloned().collect();
@@ -706,8 +710,14 @@ impl WriterThread {
         }
         schema::encode_egm(&mut self.buf, e);
         self.bytes_since_flush += self.buf.len() as u64 + 31;
-        let header = MessageHeader { channel_id: self.channel_ids[7], sequence: e.tick as u32, log_time: sim_time_ns(e.sim_time_s), publish_time: wall_clock_ns() };
-        self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)
+        // The timeline of every channel: the run's start + simulated time (publish = log).
+        let log_time = self.start_ns + sim_time_ns(e.sim_time_s);
+        let header = MessageHeader { channel_id: self.channel_ids[7], sequence: e.tick as u32, log_time, publish_time: log_time };
+        self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
+        if let Some(live) = self.live.as_mut() {
+            live.offer(7, log_time, &self.buf, true);
+        }
+        Ok(())
     }
 
     fn write_event(&mut self, e: &EventRecord) -> Result<(), mcap::McapError> {
@@ -1052,7 +1062,7 @@ pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
 struct FoxChannel {
     /// MCAP channel id.
     id: u16,
-    /// Index among the live view's channels (after [`CHANNELS`]).
+    /// Index among the live view's channels (after the [`CHANNELS`] it serves).
     live: usize,
 }
 
@@ -1092,8 +1102,9 @@ impl FoxgloveChannels {
         d
     }
 
-    /// Registers `defs` in the file; the live view numbers them after [`CHANNELS`].
-    fn register(mcap: &mut McapFile, defs: &[FoxDef]) -> Result<Self, mcap::McapError> {
+    /// Registers `defs` in the file; the live view numbers them after its `ros_channels` first
+    /// [`CHANNELS`].
+    fn register(mcap: &mut McapFile, defs: &[FoxDef], ros_channels: usize) -> Result<Self, mcap::McapError> {
         let mut ch = FoxgloveChannels::default();
         for (i, d) in defs.iter().enumerate() {
             let (name, encoding, data) = &d.schema;
@@ -1106,7 +1117,7 @@ impl FoxgloveChannels {
                 crate::scene::UNDER_WHEEL_TOPIC => &mut ch.under_wheel,
                 _ => &mut ch.log,
             };
-            *slot = Some(FoxChannel { id, live: CHANNELS.len() + i });
+            *slot = Some(FoxChannel { id, live: ros_channels + i });
         }
         Ok(ch)
     }
