@@ -118,6 +118,8 @@ pub struct ReportNumbers {
     pub misses_by_cause: Vec<(&'static str, u64)>,
     /// The rig's and controller's own misses (all but the host's) per period.
     pub own_miss_rate: Option<f64>,
+    /// Every missed tick of a real-time recording and its cause, in tick order.
+    pub missed_ticks: Vec<(u64, &'static str)>,
     #[serde(skip)]
     pub attribution: Option<crate::attribution::Attribution>,
 }
@@ -211,6 +213,7 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         worst_window_success_rate: attribution.as_ref().and_then(|a| a.worst_window).map(|w| w.0),
         misses_by_cause: by_cause,
         own_miss_rate: attribution.as_ref().filter(|a| a.stamped && a.periods > 0).map(|a| a.own_miss_rate()),
+        missed_ticks: attribution.as_ref().map_or_else(Vec::new, |a| a.missed_ticks.iter().map(|&(t, c)| (t, c.name())).collect()),
         attribution,
     }
 }
