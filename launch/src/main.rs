@@ -137,6 +137,9 @@ struct TimingArgs {
     /// Let idle CPUs halt (do not hold /dev/cpu_dma_latency at 0; scenario `loop.idle_poll`).
     #[arg(long)]
     no_idle_poll: bool,
+    /// The host-floor probe's period, µs (default: plant-sim's, 250; at most the loop's period)
+    #[arg(long)]
+    probe_period_us: Option<u64>,
     #[command(flatten)]
     live: LiveArgs,
 }
@@ -280,6 +283,7 @@ fn prepare(
         quiet: false,
         live,
         host_probe: false,
+        host_probe_period_us: None,
         no_controller,
     })
 }
@@ -488,6 +492,7 @@ fn main() {
             let live = a.live.config();
             let mut l = prepare(rig, scenario, Some("realtime".into()), ("--seconds", Some(a.seconds)), Some(dir), a.controller, live)?;
             l.host_probe = true;
+            l.host_probe_period_us = a.probe_period_us;
             launch_and_report(&l, true, a.json.as_deref())
         })(),
         Cmd::Sweep(a) => run_sweep(a),

@@ -192,7 +192,8 @@ fn host_probe_lines(p: &Value) -> String {
     for c in p.get("cpus").and_then(Value::as_array).into_iter().flatten() {
         let cpu = int(c, "cpu");
         if let Some(d) = c.get("latency") {
-            s += &dist_line(&format!("host probe CPU {cpu}"), d);
+            let every = c.get("period_us").and_then(Value::as_f64).map_or(String::new(), |us| format!(", every {us:.0} us"));
+            s += &dist_line(&format!("host probe CPU {cpu}{every}"), d);
         }
         let fifo = c.get("sched_fifo").and_then(Value::as_bool).unwrap_or(false);
         let stalls: Vec<String> = c

@@ -29,6 +29,8 @@ pub struct RigLaunch {
     pub live: Option<recordings::LiveConfig>,
     /// The plant runs the host-floor probe (`plant-sim --host-probe`): for `rig timing`.
     pub host_probe: bool,
+    /// Its period, µs (None: plant-sim's default).
+    pub host_probe_period_us: Option<u64>,
     /// `--controller none` (EGM scenarios): start no controller, the plant waits for an external
     /// EGM client at the scenario's sensor address.
     pub no_controller: bool,
@@ -259,6 +261,9 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     }
     if l.host_probe {
         plant_cmd.arg("--host-probe");
+        if let Some(us) = l.host_probe_period_us {
+            plant_cmd.arg("--host-probe-period-us").arg(us.to_string());
+        }
     }
     let mut plant = spawn(&mut plant_cmd, "plant", &l.plant_bin)?;
     let mut plant_out = plant.stdout.take().context("plant stdout")?;

@@ -592,6 +592,7 @@ impl PlantLoop<'_> {
                 probe: self.probe.is_some(),
                 probe_late_ns,
                 probe_stall_from_ns: if probe_late_ns > 0 { rel(probe_at_ns) } else { 0 },
+                probe_period_ns: self.probe.map_or(0, |p| p.period_ns()),
             });
             stats.plant_compute.record(plant_ns);
             if let Some(r) = self.recorder.as_deref_mut() {

@@ -1,6 +1,6 @@
 //! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR]
 //! [--live ADDR [--live-rate HZ]]`
-//! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR] [--host-probe]`
+//! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR] [--host-probe [--host-probe-period-us US]]`
 //!
 //! Runs the plant daemon; at exit prints one line of JSON with the run's summary on stdout.
 //! Exit status: 0 run completed, 1 error, 69 the rig name is held by a live plant, 71 shared
@@ -41,10 +41,13 @@ struct Args {
     /// Per-tick channels of the live view at this rate, Hz of simulated time; 0: every tick.
     #[arg(long, default_value_t = recordings::live::DEFAULT_RATE_HZ, requires = "live")]
     live_rate: f64,
-    /// Run the host-floor probe beside the loop (a thread per CPU waking on 1 ms deadlines;
+    /// Run the host-floor probe beside the loop (a thread per CPU waking on absolute deadlines;
     /// real time only): its latency and stalls go into the summary and `/timing`.
     #[arg(long)]
     host_probe: bool,
+    /// The probe's period, µs (at most the loop's period; 10 µs at least).
+    #[arg(long, default_value_t = plant_sim::probe::DEFAULT_PERIOD_NS / 1000, requires = "host_probe")]
+    host_probe_period_us: u64,
 }
 
 fn main() {
@@ -60,6 +63,7 @@ fn main() {
         cache_dir: a.cache_dir.unwrap_or_else(strip::cache::cache_dir),
         live: a.live.map(|addr| recordings::LiveConfig { addr, rate_hz: a.live_rate, ..Default::default() }),
         host_probe: a.host_probe,
+        host_probe_period_ns: a.host_probe_period_us * 1000,
     };
     match plant_sim::run::run(&opts) {
         // Both writes tolerate a closed pipe: a launcher killed with SIGKILL leaves its end closed.

@@ -1,7 +1,10 @@
 //! The host-floor probe (`plant-sim --host-probe`, which `rig timing` passes): one thread per CPU
 //! the plant may run on, pinned there, SCHED_FIFO above the loop when permitted, sleeping to
-//! absolute 1 ms deadlines (CLOCK_MONOTONIC, TIMER_ABSTIME) and doing nothing else, as cyclictest
-//! does. Its wake-up latency is what the host alone costs on that CPU; its stalls (a wake-up
+//! absolute deadlines every [`DEFAULT_PERIOD_NS`] (CLOCK_MONOTONIC, TIMER_ABSTIME; a quarter of the
+//! loop's period) and doing nothing else, as cyclictest does. It sees a stall only from the first of
+//! its deadlines the stall covers, so the period bounds how early a stall may have begun unseen:
+//! 250 µs, against 1 ms, turns the stall that made the controller miss half its budget from a
+//! quarter seen into at most 250 µs unseen. Its wake-up latency is what the host alone costs on that CPU; its stalls (a wake-up
 //! later than [`HOST_STALL_NS`]) are time-stamped. It lives in the plant's process because the
 //! plant is the clock master: its deadlines sit half a period after the plant's (the probe never
 //! wakes when the loop does), and its latest wake-up goes into each tick's `/timing` record
@@ -21,6 +24,9 @@ pub use recordings::attribution::HOST_STALL_NS;
 /// (80), so that what it measures is the host, not the rig; it runs for a few µs per period.
 pub const PROBE_PRIORITY: i32 = 90;
 
+/// The probe's default period: four wake-ups per 1 ms tick (`plant-sim --host-probe-period-us`).
+pub const DEFAULT_PERIOD_NS: u64 = 250_000;
+
 /// Stalls kept per CPU (the most recent; the count is exact).
 pub const STALL_RING: usize = 1024;
 
@@ -32,6 +38,8 @@ pub struct Latest {
     at_ns: AtomicU64,
     /// The plant's first deadline (CLOCK_MONOTONIC ns), 0 until its loop starts.
     grid_ns: AtomicU64,
+    /// The probe's period, ns: a stall began at most this long before the deadline it was seen at.
+    period_ns: AtomicU64,
 }
 
 impl Latest {
@@ -41,6 +49,11 @@ impl Latest {
     pub fn take(&self) -> (u64, u64) {
         let late = self.late_ns.swap(0, Ordering::Relaxed);
         (late, self.at_ns.load(Ordering::Relaxed))
+    }
+    /// The probe's period, ns (recorded with every tick, for the attribution).
+    #[inline]
+    pub fn period_ns(&self) -> u64 {
+        self.period_ns.load(Ordering::Relaxed)
     }
     /// The plant's loop tells where its grid is.
     pub fn set_grid(&self, first_deadline_ns: u64) {
@@ -52,6 +65,8 @@ impl Latest {
 #[derive(Debug, Clone)]
 pub struct CpuReport {
     pub cpu: usize,
+    /// Its period, ns.
+    pub period_ns: u64,
     pub pinned: bool,
     pub sched_fifo: bool,
     pub latency: Histogram,
@@ -84,6 +99,7 @@ impl Probe {
     /// One probe thread on each of `cpus`, period `period_ns`.
     pub fn start(cpus: &[usize], period_ns: u64) -> std::io::Result<Probe> {
         let latest = Arc::new(Latest::default());
+        latest.period_ns.store(period_ns, Ordering::Relaxed);
         let stop = Arc::new(AtomicBool::new(false));
         let mut threads = Vec::with_capacity(cpus.len());
         for &cpu in cpus {
@@ -114,7 +130,8 @@ fn run(cpu: usize, period_ns: u64, latest: &Latest, stop: &AtomicBool) -> CpuRep
         }
         rt::sleep_until_mono_ns(rt::now_mono_ns() + period_ns);
     };
-    // Half a period after the plant's deadlines, the first one still ahead.
+    // Half a probe period after the plant's deadlines (whose period is a multiple of the probe's),
+    // so the probe never wakes when the loop does; the first one still ahead.
     let phase = grid + period_ns / 2;
     let now = rt::now_mono_ns();
     let mut next = phase + now.saturating_sub(phase).div_ceil(period_ns) * period_ns;
@@ -139,13 +156,14 @@ fn run(cpu: usize, period_ns: u64, latest: &Latest, stop: &AtomicBool) -> CpuRep
     let n = stalls.min(STALL_RING as u64) as usize;
     let start = if stalls > STALL_RING as u64 { (stalls % STALL_RING as u64) as usize } else { 0 };
     let recent_stalls = (0..n).map(|i| ring[(start + i) % STALL_RING]).collect();
-    CpuReport { cpu, pinned, sched_fifo, latency, stalls, recent_stalls }
+    CpuReport { cpu, period_ns, pinned, sched_fifo, latency, stalls, recent_stalls }
 }
 
 impl CpuReport {
     pub fn to_json(&self, edges_us: &[f64]) -> serde_json::Value {
         serde_json::json!({
             "cpu": self.cpu,
+            "period_us": self.period_ns as f64 * 1e-3,
             "pinned": self.pinned,
             "sched_fifo": self.sched_fifo,
             "latency": self.latency.to_json(edges_us),
@@ -166,6 +184,7 @@ mod tests {
         let cpus = allowed_cpus();
         assert!(!cpus.is_empty());
         let p = Probe::start(&cpus[..1], 1_000_000).unwrap();
+        assert_eq!(p.latest.period_ns(), 1_000_000);
         let t0 = rt::now_mono_ns();
         p.latest.set_grid(t0);
         std::thread::sleep(std::time::Duration::from_millis(60));
@@ -173,7 +192,7 @@ mod tests {
         assert!(seen == 0 || at > t0, "the stall's deadline {at} is on the probe's grid after {t0}");
         let r = p.finish();
         assert_eq!(r.len(), 1);
-        assert_eq!(r[0].cpu, cpus[0]);
+        assert_eq!((r[0].cpu, r[0].period_ns), (cpus[0], 1_000_000));
         // 60 ms of 1 ms deadlines: about 60 wake-ups (stalls skip deadlines, so at most 61).
         let n = r[0].latency.count();
         assert!(n > 0 && n <= 62, "{n} wake-ups");

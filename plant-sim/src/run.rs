@@ -32,6 +32,8 @@ pub struct RunOptions {
     pub live: Option<recordings::LiveConfig>,
     /// Run the host-floor probe beside the loop (real time only; `rig timing` asks for it).
     pub host_probe: bool,
+    /// Its period, ns (at most the loop's; [`crate::probe::DEFAULT_PERIOD_NS`]).
+    pub host_probe_period_ns: u64,
 }
 
 /// Run length when neither the command line nor the scenario sets one: the nominal trajectory
@@ -267,8 +269,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let probe = match (opts.host_probe, mode) {
         (true, Mode::Realtime) => {
             let cpus = crate::probe::allowed_cpus();
-            let p = crate::probe::Probe::start(&cpus, period_ns).context("starting the host probe")?;
-            tracing::info!(?cpus, "host probe running (SCHED_FIFO {} when permitted)", crate::probe::PROBE_PRIORITY);
+            let probe_period_ns = opts.host_probe_period_ns.clamp(10_000, period_ns);
+            let p = crate::probe::Probe::start(&cpus, probe_period_ns).context("starting the host probe")?;
+            tracing::info!(?cpus, probe_period_us = probe_period_ns / 1000, "host probe running (SCHED_FIFO {} when permitted)", crate::probe::PROBE_PRIORITY);
             Some(p)
         }
         (true, Mode::Lockstep) => {

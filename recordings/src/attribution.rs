@@ -17,6 +17,9 @@ pub const COMPUTE_SHARE: f64 = 0.7;
 /// A probe wake-up later than this (the controller's wake share of the default 500 µs budget)
 /// is a host stall: what the probe counts and time-stamps.
 pub const HOST_STALL_NS: u64 = 100_000;
+/// Rows whose probe reports a missed tick is attributed from: the one before it, its own, and the
+/// four after it.
+const STALL_ROWS: usize = 6;
 /// The sliding window of the success rate, periods (100 ms at 1 kHz).
 pub const WINDOW_PERIODS: usize = 100;
 
@@ -262,13 +265,17 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
             }
             if t.missed {
                 let ctrl = s.controller.or_else(|| late_stamps(i));
-                // The stalls reported with this tick and its neighbours, on this tick's time line.
-                let mut stalls = [Stall { from_ns: 0, to_ns: 0 }; 3];
+                // The stalls reported with the tick before this one up to four after it, on this
+                // tick's time line: a stall is reported at the plant's first tick after the probe
+                // woke, so one that covered this tick's budget for a few ms comes a few ticks later.
+                let mut stalls = [Stall { from_ns: 0, to_ns: 0 }; STALL_ROWS];
                 let mut n = 0;
-                for r in &rows[i.saturating_sub(1)..rows.len().min(i + 2)] {
+                for r in &rows[i.saturating_sub(1)..rows.len().min(i + STALL_ROWS - 1)] {
                     if let Some(o) = r.timing.stages.filter(|o| o.probe && o.probe_late_ns > 0) {
-                        let from = o.probe_stall_from_ns + o.deadline_since_start_ns as i64 - s.deadline_since_start_ns as i64;
-                        stalls[n] = Stall { from_ns: from, to_ns: from + o.probe_late_ns as i64 };
+                        // Seen from the deadline it was late for; the probe's deadline before that one
+                        // was met, so the stall began at most a probe period earlier.
+                        let at = o.probe_stall_from_ns + o.deadline_since_start_ns as i64 - s.deadline_since_start_ns as i64;
+                        stalls[n] = Stall { from_ns: at - o.probe_period_ns as i64, to_ns: at + o.probe_late_ns as i64 };
                         n += 1;
                     }
                 }
@@ -499,5 +506,39 @@ mod tests {
         assert_eq!((a.bursts[0].periods, a.bursts[0].tick), (51, 600));
         let text = format_table(&a);
         assert!(text.contains("| controller compute over its share | 1 |") && text.contains("host burst: 51 periods"), "{text}");
+    }
+
+    /// Ticks 0..10 answered, tick 5 not answered; the probe's report of a stall comes with tick
+    /// 6: late `late_us` for its deadline `at_us` after tick 5's, on a `period_us` grid.
+    fn stall_after_no_answer(period_us: u64, at_us: i64, late_us: u64) -> Cause {
+        let rows: Vec<TimingRow> = (0..10u64)
+            .map(|k| match k {
+                5 => row(k, StageStamps { probe_period_ns: period_us * 1000, ..missed() }, true),
+                6 => row(
+                    k,
+                    StageStamps {
+                        probe_period_ns: period_us * 1000,
+                        probe_late_ns: late_us * 1000,
+                        probe_stall_from_ns: (at_us - 1000) * 1000,
+                        ..stamps()
+                    },
+                    false,
+                ),
+                _ => row(k, StageStamps { probe_period_ns: period_us * 1000, ..stamps() }, false),
+            })
+            .collect();
+        attribute(&rows).cause_of_tick(5).unwrap()
+    }
+
+    #[test]
+    fn a_stall_began_at_most_one_probe_period_before_the_deadline_it_was_seen_at() {
+        // A 1 ms probe first late at +500 µs (546 µs): the stall may have begun just after its
+        // previous deadline, 500 µs before tick 5's, and so may have taken the whole budget.
+        assert_eq!(stall_after_no_answer(1000, 500, 546), Cause::Host);
+        // A 250 µs probe late at +625 µs, on time at +375: the host took at most the 135 µs from
+        // 375 to 510 µs of the budget, under the compute share (350 µs): the controller's.
+        assert_eq!(stall_after_no_answer(250, 625, 700), Cause::NoAnswer);
+        // Late at +375 µs, on time at +125: it may have taken the 385 µs from 125 to 510 µs.
+        assert_eq!(stall_after_no_answer(250, 375, 700), Cause::Host);
     }
 }

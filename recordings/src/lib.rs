@@ -155,6 +155,9 @@ pub struct StageStamps {
     pub probe_late_ns: u64,
     /// The deadline that wake-up was late for: the stall ran from here for `probe_late_ns`.
     pub probe_stall_from_ns: i64,
+    /// The probe's period, ns (0: not recorded, files before it: a 1 ms probe). The deadline
+    /// before `probe_stall_from_ns` was met, so the stall began at most this long before it.
+    pub probe_period_ns: u64,
 }
 
 /// The controller's stage stamps of one tick, ns after a deadline ([`StageStamps`]).

@@ -431,7 +431,7 @@ fn check_schema(path: &Path, ch: &mcap::records::Channel, schema: Option<&Schema
     if name != def.schema_name
         || encoding != SCHEMA_ENCODING
         || ch.message_encoding != MESSAGE_ENCODING
-        || data != def.schema_text.as_bytes()
+        || !is_earlier_version(data, def.schema_text)
     {
         return Err(ReadError::SchemaMismatch {
             path: path.into(),
@@ -441,6 +441,19 @@ fn check_schema(path: &Path, ch: &mcap::records::Channel, schema: Option<&Schema
         });
     }
     Ok(())
+}
+
+/// `found` is `ours` or an earlier version of it: fields are only ever appended to a message (the
+/// decoders read a shorter message's missing tail as absent), so its own message definition must
+/// be whole lines at the start of ours, and its dependent types (`MSG:` sections) equal ours.
+fn is_earlier_version(found: &[u8], ours: &str) -> bool {
+    let Ok(found) = std::str::from_utf8(found) else { return false };
+    fn split(t: &str) -> (&str, &str) {
+        t.find("\n====").map_or((t, ""), |i| t.split_at(i + 1))
+    }
+    let (our_main, our_deps) = split(ours);
+    let (main, deps) = split(found);
+    found == ours || (deps == our_deps && !main.is_empty() && main.ends_with('\n') && our_main.starts_with(main))
 }
 
 /// One MCAP record in a byte slice: opcode, body, and where the next record starts.
@@ -539,5 +552,28 @@ impl Drop for Mapped {
             // SAFETY: ptr/len come from a successful mmap.
             unsafe { libc::munmap(self.ptr, self.len) };
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::schema::TIMING;
+
+    #[test]
+    fn an_earlier_schema_is_one_whose_fields_start_ours() {
+        let ours = TIMING.schema_text;
+        assert!(is_earlier_version(ours.as_bytes(), ours));
+        // The same message without its last field (the probe's period), dependencies kept.
+        let (main, deps) = ours.split_at(ours.find("\n====").unwrap() + 1);
+        let last = main[..main.len() - 1].rfind('\n').unwrap() + 1;
+        assert!(main[last..].starts_with("uint64 probe_period_ns"), "{}", &main[last..]);
+        let earlier = format!("{}{deps}", &main[..last]);
+        assert!(is_earlier_version(earlier.as_bytes(), ours));
+        // A field renamed, a field cut in the middle of its line, a changed dependency: not ours.
+        assert!(!is_earlier_version(ours.replace("uint64 tick", "uint64 tock").as_bytes(), ours));
+        assert!(!is_earlier_version(format!("{}{deps}", &main[..last + 3]).as_bytes(), ours));
+        assert!(!is_earlier_version(format!("{}{}", &main[..last], deps.replace("int32 sec", "int64 sec")).as_bytes(), ours));
+        assert!(!is_earlier_version(b"", ours));
     }
 }

@@ -160,6 +160,7 @@ int64 late_torque_published_ns
 bool probe                      # the host-floor probe ran (rig timing)
 uint64 probe_late_ns            # ns, latest probe wake-up finished since the previous tick
 int64 probe_stall_from_ns       # the deadline it was late for: the stall ran from here
+uint64 probe_period_ns          # ns, the probe's period: the stall began at most this long before
 ================================================================================
 MSG: builtin_interfaces/Time
 int32 sec
@@ -387,6 +388,7 @@ pub fn encode_timing(buf: &mut Vec<u8>, r: &TickHead, recorder_dropped: u64) {
     w.bool(g.probe);
     w.u64(g.probe_late_ns);
     w.i64(g.probe_stall_from_ns);
+    w.u64(g.probe_period_ns);
 }
 
 pub fn encode_event(buf: &mut Vec<u8>, e: &EventRecord) {
@@ -590,6 +592,9 @@ pub fn decode_timing(msg: &[u8]) -> Result<TimingRow, CdrError> {
     Ok(TimingRow { tick, timing, recorder_dropped })
 }
 
+/// The host probe's period in files written before `/timing` carried it (the first probe).
+pub const LEGACY_PROBE_PERIOD_NS: u64 = 1_000_000;
+
 fn decode_stages(r: &mut CdrReader) -> Result<StageStamps, CdrError> {
     let mut g = StageStamps {
         deadline_since_start_ns: r.u64("deadline_since_start_ns")?,
@@ -624,6 +629,8 @@ fn decode_stages(r: &mut CdrReader) -> Result<StageStamps, CdrError> {
     g.probe = r.bool("probe")?;
     g.probe_late_ns = r.u64("probe_late_ns")?;
     g.probe_stall_from_ns = r.i64("probe_stall_from_ns")?;
+    // Files written before the field: the probe ran at the 1 ms period then.
+    g.probe_period_ns = if r.at_end() { LEGACY_PROBE_PERIOD_NS } else { r.u64("probe_period_ns")? };
     Ok(g)
 }
 
@@ -729,6 +736,7 @@ mod tests {
                 probe: true,
                 probe_late_ns: 250_000,
                 probe_stall_from_ns: -400_000,
+                probe_period_ns: 250_000,
             }),
         };
         r
@@ -754,6 +762,11 @@ mod tests {
         assert_eq!(decode_controller(&buf).unwrap(), r.diag);
         encode_timing(&mut buf, &r, 7);
         assert_eq!(decode_timing(&buf).unwrap(), TimingRow { tick: 41, timing: r.timing, recorder_dropped: 7 });
+        // One written before the probe's period was (ends at probe_stall_from_ns): a 1 ms probe.
+        buf.truncate(buf.len() - 8);
+        let legacy = decode_timing(&buf).unwrap().timing.stages.unwrap();
+        assert_eq!(legacy.probe_period_ns, LEGACY_PROBE_PERIOD_NS);
+        assert_eq!(legacy, StageStamps { probe_period_ns: LEGACY_PROBE_PERIOD_NS, ..r.timing.stages.unwrap() });
         // A message of the schema before the stage stamps (ends at recorder_dropped) still reads.
         let mut old = r;
         old.timing.stages = None;
@@ -812,7 +825,7 @@ mod tests {
                 "torque_budget_ns", "torque_received_ns", "plant_done_ns", "answered", "refused", "controller_stamped",
                 "controller_woke_ns", "controller_computed_ns", "torque_published_ns", "late_stamped", "late_tick",
                 "late_controller_woke_ns", "late_controller_computed_ns", "late_torque_published_ns", "probe", "probe_late_ns",
-                "probe_stall_from_ns"
+                "probe_stall_from_ns", "probe_period_ns"
             ]
         );
         for k in EventKind::ALL {
