@@ -237,23 +237,22 @@ impl TestRig {
 /// controller, and two such pairs on the 2-CPU host would slow each other down.
 static PYTHON_SERIAL: Mutex<()> = Mutex::new(());
 
-/// True when `python3` imports `modules` (e.g. `"iceoryx2, numpy"`); otherwise prints
-/// `SKIP: <test>: ...` with the `pip install` line and the test should return (CI installs them).
+/// True when `python3` imports `modules` (e.g. `"iceoryx2, numpy"`); otherwise the test fails,
+/// naming the `pip install` line: the third-party client is what the test is about, and
+/// `.ci/deps` (part of README's test command) installs it.
 pub fn python_has(test: &str, modules: &str, pip: &str) -> bool {
     let ok = Command::new("python3")
         .args(["-c", &format!("import {modules}")])
         .output()
         .is_ok_and(|o| o.status.success());
-    if !ok {
-        println!("SKIP: {test}: python3 lacks {modules} (pip install {pip})");
-    }
+    assert!(ok, "{test}: python3 lacks {modules}: run `bash .ci/deps` (or pip install {pip})");
     ok
 }
 
 /// A lockstep rig running `duration_s` with the Python controller `script` (an executable file
 /// with a shebang, started as `script --rig NAME --scenario FILE` like `rig run` starts any
-/// controller), holding the Python serial lock; `None` (after a `SKIP:` line) when python3 lacks
-/// `modules`. `loop_extra`: more `[loop]` lines for the scenario (e.g. `"peer_stall_timeout_s = 0.3\n"`).
+/// controller), holding the Python serial lock; the test fails when python3 lacks `modules`
+/// ([`python_has`]). `loop_extra`: more `[loop]` lines for the scenario (e.g. `"peer_stall_timeout_s = 0.3\n"`).
 pub fn python_rig(
     test: &str,
     tag: &str,

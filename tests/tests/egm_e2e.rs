@@ -2,7 +2,7 @@
 //! real third-party EGM client, `abb-robot-client`'s `abb_robot_client.egm.EGM` (Python, unchanged;
 //! `tests/python/egm_client.py` drives it), over UDP on a port of each test's own. Build first:
 //! `cargo build --release --workspace --bins`; needs `pip install abb-robot-client` (the tests
-//! print `SKIP:` and pass without it; `.ci/run` installs it).
+//! fail without it; `.ci/deps` installs it).
 
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};

@@ -3,8 +3,8 @@
 //! `@mcap/support`'s zstd, `@foxglove/rosmsg2-serialization`, the protobuf definitions of
 //! `@foxglove/schemas` through protobufjs). This test makes the expectations independently: the
 //! run's wall-clock window, the robot crate's forward kinematics of the recorded q, the strip
-//! mesh's top node count. `.ci/run` installs the npm packages (`npm ci` in `recordings/ts`);
-//! without them the test prints `SKIP:`.
+//! mesh's top node count. `.ci/deps` installs the npm packages (`npm ci` in `recordings/ts`);
+//! without them the test fails.
 
 use std::path::PathBuf;
 use std::process::Command;

@@ -1,7 +1,7 @@
 //! End-to-end: `messages/examples/minimal_controller.py`, the controller a stranger writes from
 //! `messages/README.md` alone (iceoryx2 Python bindings, no robot model), drives the real
 //! `plant-sim`. Build first: `cargo build --release --workspace --bins`; needs
-//! `pip install iceoryx2==0.10.0` (the end-to-end tests print `SKIP:` and pass without it).
+//! `pip install iceoryx2==0.10.0` (the end-to-end tests fail without it; `.ci/deps` installs it).
 
 use std::path::{Path, PathBuf};
 use std::sync::MutexGuard;

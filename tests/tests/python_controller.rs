@@ -1,7 +1,7 @@
 //! End-to-end: the Python template controller `examples/python_controller/hold_controller.py`
 //! (iceoryx2 Python bindings + Pinocchio) drives the real `plant-sim`. Build first:
 //! `cargo build --release --workspace --bins`; needs `pip install iceoryx2==0.10.0 pin numpy`
-//! (the tests print `SKIP:` and pass without them).
+//! (the tests fail without them; `.ci/deps` installs them).
 
 use std::path::PathBuf;
 use std::sync::MutexGuard;
