@@ -13,18 +13,13 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use messages::ports::{ControllerPorts, Wake};
-use messages::{
-    check_version, state_flags, ControllerDiagnostics, ControllerStatus, JointState, JointTorque, PlantStatus, Wrench,
-    WrenchFrame,
-};
-use nalgebra::{Matrix3, Vector3};
+use messages::{check_version, state_flags, JointState, PlantStatus, Wrench, WrenchFrame};
+use nalgebra::Vector3;
 use robot::Vec6;
 use scenario::Scenario;
 
-use crate::gains::Gains;
 use crate::law::ControlLaw;
-use crate::model::{controller_robot, tool_down_rotation, TaskFrame};
-use crate::reference::{ReferenceGenerator, ReferenceParams};
+use crate::step::Controller;
 
 /// How the daemon runs.
 #[derive(Clone, Debug)]
@@ -103,14 +98,6 @@ fn setup_realtime(priority: i32) {
     }
 }
 
-/// Measured wrench on the tool in base axes at the TCP, (force, torque) as one 6-vector.
-fn wrench_on_tool_base(w: &Wrench, rot_base_tool: &Matrix3<f64>) -> Vec6 {
-    let f = Vector3::from(w.force);
-    let m = Vector3::from(w.torque);
-    let (f, m) = if w.frame == WrenchFrame::SensorAtTcp as u32 { (rot_base_tool * f, rot_base_tool * m) } else { (f, m) };
-    Vec6::new(f.x, f.y, f.z, m.x, m.y, m.z)
-}
-
 /// Task-space mass of the controller's model along the task normal at `q`:
 /// 1 / (n_yᵀ J M⁻¹ Jᵀ n_y) — the wheel's effective mass the gain rule reports.
 pub fn effective_normal_mass(law: &ControlLaw, q: &Vec6) -> f64 {
@@ -134,11 +121,7 @@ fn controller_id(pid: u32) -> u64 {
 pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     let s = &cfg.scenario;
     let ports = ControllerPorts::open(&cfg.rig, "controller").with_context(|| format!("controller for rig {:?}", cfg.rig))?;
-    let task = TaskFrame::from_scenario(s);
-    let robot = controller_robot(s);
-    let mut law = ControlLaw::new(robot, task, Gains::from_scenario(s, f64::NAN), tool_down_rotation());
-    let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
-    let id = controller_id(std::process::id());
+    let mut controller = Controller::from_scenario(s).with_id(controller_id(std::process::id())).with_contract_version(cfg.contract_version);
     setup_realtime(cfg.rt_priority);
     tracing::info!(rig = %cfg.rig, contract_version = cfg.contract_version, "controller waiting for the plant");
 
@@ -163,7 +146,6 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     // are not ours. A new plant after ours is gone is a new connection.
     let mut plant: Option<u128> = None;
     let mut stall_logged = false;
-    let mut was_stopped = false;
     loop {
         let deadline = match last_state_at {
             Some(t) if stall_logged => (t + stall_timeout).min(Instant::now() + messages::liveness::WATCH_PERIOD),
@@ -275,51 +257,15 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         if last_tick.is_some_and(|t| state.tick <= t) {
             continue; // already answered
         }
-        let q = Vec6::from(state.q);
-        let qd = Vec6::from(state.qd);
-        let first = last_tick.is_none();
-        if first {
-            // First state: start the references from here (a take-over of a running plant first
-            // moves the TCP from where it is to the start pose, then starts its own run). The design report is logged after this tick's answer is out.
-            let kin = law.kinematics(&q, &qd);
-            reference.reset_from(state.sim_time_s, &kin.pos_task_m);
+        if last_tick.is_none() {
+            controller.restart();
         }
-        // Anti-windup (DESIGN section 10): while the plant holds our torque or is in safe stop,
-        // the plan stands still and the force integral too; coming back from a safe stop, the
-        // controller re-engages from the measured pose and force (no torque step).
-        let status = PlantStatus::from_u32(state.plant_status);
-        let stopped = status == Some(PlantStatus::SafeStop);
-        let running = matches!(status, Some(PlantStatus::Running | PlantStatus::WaitingForController));
-        if stopped && !was_stopped && !first {
-            let kin = law.kinematics(&q, &qd);
-            let w = wrench_on_tool_base(&wrench, &kin.rot_base_tool);
-            reference.reengage(state.sim_time_s, &kin.pos_task_m, &kin.vel_task_mps, law.strip_force_y(&Vector3::new(w[0], w[1], w[2])));
-        } else if !running && !first {
-            reference.hold(state.period_s);
-        }
-        was_stopped = stopped;
-        law.set_integrating(running && state.flags & state_flags::IN_CONTACT != 0);
-        let (tau, diag) = step(&mut law, &mut reference, &state, &wrench, &q, &qd, cfg.contract_version);
-        let mut diag = diag;
+        let first = controller.is_first();
+        let (torque, mut diag) = controller.process(&state, &wrench);
         diag.computed_mono_ns = messages::monotonic_ns();
         let compute_ns = woke.elapsed().as_nanos() as u64;
         diag.compute_time_ns = compute_ns;
         diag.woke_mono_ns = woke_mono_ns;
-        let torque = JointTorque {
-            contract_version: cfg.contract_version,
-            // A reflex latched the plant's safe stop: acknowledge it (starting) with the
-            // re-engaged torque, as libfranka's automatic error recovery does.
-            controller_status: if !tau.iter().all(|x| x.is_finite()) {
-                ControllerStatus::Fault as u32
-            } else if state.flags & state_flags::REFLEX != 0 {
-                ControllerStatus::Starting as u32
-            } else {
-                ControllerStatus::Active as u32
-            },
-            tick: state.tick,
-            controller_id: id,
-            tau: tau.into(),
-        };
         // The stage stamps (messages README, ControllerDiagnostics): handed over now.
         diag.published_mono_ns = messages::monotonic_ns();
         ports.publish(&torque, Some(&diag)).with_context(|| format!("rig {:?}: publish torque of tick {}", cfg.rig, state.tick))?;
@@ -329,8 +275,9 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         summary.max_compute_ns = summary.max_compute_ns.max(compute_ns);
         compute_sum_ns += u128::from(compute_ns);
         if first {
+            let law = controller.law();
             let f = &law.gains().force;
-            let m_eff = effective_normal_mass(&law, &q);
+            let m_eff = effective_normal_mass(law, &Vec6::from(state.q));
             tracing::info!(
                 tick = state.tick,
                 k_s = f.strip_stiffness_n_per_m,
@@ -385,35 +332,4 @@ fn handle_state_or_exit(cfg: &DaemonConfig, st: &JointState) -> anyhow::Result<b
     Ok(PlantStatus::from_u32(st.plant_status) == Some(PlantStatus::ShuttingDown))
 }
 
-/// One control step (allocation-free): references, law, diagnostics.
-pub fn step(
-    law: &mut ControlLaw,
-    reference: &mut ReferenceGenerator,
-    state: &JointState,
-    wrench: &Wrench,
-    q: &Vec6,
-    qd: &Vec6,
-    contract_version: u32,
-) -> (Vec6, ControllerDiagnostics) {
-    let kin = law.kinematics(q, qd);
-    let w = wrench_on_tool_base(wrench, &kin.rot_base_tool);
-    let force_y = law.strip_force_y(&Vector3::new(w[0], w[1], w[2]));
-    let r = reference.update(state.sim_time_s, force_y, kin.pos_task_m.y);
-    let out = law.compute(q, qd, &kin, &w, &r, state.period_s);
-    let diag = ControllerDiagnostics {
-        contract_version,
-        force_control_active: u32::from(r.force_mode),
-        tick: state.tick,
-        force_ref_n: r.force_y_n,
-        force_meas_n: out.force_meas_n,
-        pos_ref_task_m: r.pos_m.into(),
-        pos_err_task_m: out.pos_err_task_m.into(),
-        rot_err_task_rad: out.rot_err_task_rad.into(),
-        force_integral_ns: out.force_integral_ns,
-        compute_time_ns: 0,
-        woke_mono_ns: 0,
-        computed_mono_ns: 0,
-        published_mono_ns: 0,
-    };
-    (out.tau, diag)
-}
+pub use crate::step::step;

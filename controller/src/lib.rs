@@ -8,3 +8,6 @@ pub mod gains;
 pub mod law;
 pub mod model;
 pub mod reference;
+pub mod step;
+
+pub use step::Controller;

@@ -5,13 +5,15 @@
 //!   supervises them and prints a summary; `--live` serves the run to Foxglove as it goes.
 //! - `rig timing [--seconds N] [--live [ADDR]]`: a real-time timing run with latency and jitter distributions.
 //! - `rig sweep [SCENARIO.toml] --set section.field=v1,v2,... [--grid]`: a parameter study, one
-//!   lockstep run per case, tabulated from the recordings.
+//!   in-process lockstep run per case, several at once across the cores, tabulated from the
+//!   recordings.
 //! - `rig robot ...`, `rig model ...`, `rig replay`, `rig report`, `rig compare`, `rig design`: the tools of the
 //!   robot, strip, recordings and design crates.
 //!
 //! `run`, `timing` and `sweep` check every flag and every scenario value before any daemon starts;
 //! a refusal names the flag (and the file, line and field of a scenario value).
 
+mod in_process;
 mod summary;
 mod supervise;
 mod sweep;
@@ -68,6 +70,10 @@ struct RunArgs {
     /// is written to <DIR>/scenario.toml and checked like any scenario file before anything starts.
     #[arg(long = "set", value_parser = sweep::parse_set)]
     set: Vec<sweep::Axis>,
+    /// Lockstep only: run the plant's tick and the controller's step in this process, one
+    /// thread, no daemons and no iceoryx2 (bit-identical to the daemons' lockstep run).
+    #[arg(long)]
+    in_process: bool,
     #[command(flatten)]
     launch: LaunchArgs,
     #[command(flatten)]
@@ -383,7 +389,33 @@ fn timing_scenario(dir: &Path, a: &TimingArgs) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
-/// `rig sweep`: every case in lockstep, then the table; exit 0 only if every case is clean, 4 if
+/// `rig run --mode lockstep --in-process`: the run in this process, summarised as `rig run` does.
+fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Path) -> anyhow::Result<i32> {
+    let parsed = scenario::Scenario::load(scenario)?;
+    check_duration("--duration", duration_s, &parsed, scenario)?;
+    std::fs::create_dir_all(dir).with_context(|| format!("--out {}: creating the output directory", dir.display()))?;
+    plant_sim::rt::install_stop_signals();
+    let cache_dir = strip::cache::cache_dir();
+    eprintln!("rig {rig}: plant tick + controller step in process (lockstep, no daemons), scenario {}", scenario.display());
+    let recording = dir.join("run.mcap");
+    let v = in_process::run(rig, scenario, duration_s, &recording, |s| plant_sim::physics::Physics::new(s, &cache_dir))?;
+    print!("{}", summary::run_summary(&v));
+    let numbers = match recordings::cli::summary_numbers(&recording) {
+        Ok(n) => Some(n),
+        Err(e) => {
+            eprintln!("rig: could not read back {}: {e:#}", recording.display());
+            None
+        }
+    };
+    print!("{}", summary::recording_summary(&v, numbers.as_ref()));
+    let ending = if v["stopped_by_signal"].as_bool() == Some(true) { Ending::Interrupted } else { Ending::Completed };
+    let outcome = supervise::Outcome { ending, plant_summary: Some(v) };
+    let code = outcome.exit_code();
+    println!("{}", summary::status_line(code, &outcome.ending, outcome.plant_summary.as_ref()));
+    Ok(code)
+}
+
+/// `rig sweep`: every case in lockstep, in process (one per core at a time), then the table; exit 0 only if every case is clean, 4 if
 /// every case reached its end but some with a safe stop, reflex, refused torque or an incomplete
 /// recording, 1 if a case failed, 130/143 if the sweep was interrupted.
 fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
@@ -405,28 +437,33 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
         check_duration("--duration", a.launch.duration, &s, &path)?;
         planned.push((case_dir, path, label));
     }
-    let rt = runtime()?;
-    let mut results = Vec::with_capacity(cases.len());
-    let mut interrupted = None;
-    for (n, (case_dir, path, label)) in planned.into_iter().enumerate() {
-        let mut l = prepare(supervise::unique_rig_name(), path.clone(), Some("lockstep".into()), ("--duration", a.launch.duration), Some(case_dir), a.launch.controller.clone(), None)?;
-        l.quiet = true;
-        eprintln!("rig sweep: case {}/{}: {label}", n + 1, cases.len());
-        let outcome = rt.block_on(supervise::supervise(&l))?;
+    anyhow::ensure!(a.launch.controller.is_none(), "rig sweep runs its cases in process with the built-in controller; --controller needs rig run");
+    plant_sim::rt::install_stop_signals();
+    let cache_dir = strip::cache::cache_dir();
+    let models = sweep::SharedModels::new(&cache_dir);
+    let n_cases = planned.len();
+    let done = sweep::run_cases(&planned, |n, (case_dir, path, label)| {
+        let recording = case_dir.join("run.mcap");
+        let rig = format!("sweep-case-{n:02}");
+        let summary = in_process::run(&rig, path, a.launch.duration, &recording, |s| models.physics(s));
+        let (ending, summary) = match summary {
+            Ok(v) if v["stopped_by_signal"].as_bool() == Some(true) => (Ending::Interrupted, Some(v)),
+            Ok(v) => (Ending::Completed, Some(v)),
+            Err(e) => (Ending::PlantFailed(format!("{e:#}")), None),
+        };
+        let outcome = supervise::Outcome { ending, plant_summary: summary };
         let exit_code = outcome.exit_code();
         let line = summary::status_line(exit_code, &outcome.ending, outcome.plant_summary.as_ref());
         let status = line.split_once(": ").and_then(|(_, rest)| rest.split_once(": ")).map_or(line.clone(), |(_, why)| why.to_string());
-        if exit_code != 0 {
-            eprintln!("rig sweep: case {}/{}: {line}", n + 1, cases.len());
-        }
-        let stopped = matches!(outcome.ending, Ending::Interrupted | Ending::Terminated);
+        eprintln!("rig sweep: case {}/{n_cases}: {label}: {line}", n + 1);
         let summary = outcome.plant_summary.as_ref();
-        let numbers = recordings::cli::summary_numbers(&l.recording).ok();
+        let numbers = recordings::cli::summary_numbers(&recording).ok();
         let rolling = numbers.as_ref().and_then(|n| n.rolling.clone());
-        results.push(sweep::CaseResult {
-            label,
-            scenario: path,
-            recording: l.recording.clone(),
+        let stopped = matches!(outcome.ending, Ending::Interrupted | Ending::Terminated);
+        let result = sweep::CaseResult {
+            label: label.clone(),
+            scenario: path.clone(),
+            recording: recording.clone(),
             exit_code,
             status,
             misses: summary.and_then(|v| v.get("misses")).and_then(serde_json::Value::as_u64),
@@ -436,14 +473,14 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
             bond_share: rolling.as_ref().and_then(|r| r.bond_pressure_share),
             bond_weakest_pa: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[0]),
             bond_weakest_z_m: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[1]),
-        });
-        if stopped {
-            // Ctrl-C or SIGTERM stops the whole sweep, not just this case.
-            eprintln!("rig sweep: stopped after case {}/{}", n + 1, cases.len());
-            interrupted = Some(exit_code);
-            break;
-        }
+        };
+        (result, stopped)
+    });
+    let interrupted = done.iter().any(|(_, stopped)| *stopped).then_some(130);
+    if interrupted.is_some() {
+        eprintln!("rig sweep: interrupted");
     }
+    let results: Vec<sweep::CaseResult> = done.into_iter().map(|(r, _)| r).collect();
     print!("{}", sweep::table(&results));
     let json = dir.join("sweep.json");
     std::fs::write(&json, serde_json::to_string_pretty(&results)?).with_context(|| format!("writing {}", json.display()))?;
@@ -461,6 +498,12 @@ fn main() {
             let dir = a.launch.out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
             if !a.set.is_empty() {
                 scenario = sweep::write_overridden(&scenario, &a.set, &dir.join("scenario.toml"))?;
+            }
+            if a.in_process {
+                anyhow::ensure!(a.mode.as_deref() == Some("lockstep"), "--in-process runs lockstep only: give --mode lockstep");
+                anyhow::ensure!(a.launch.controller.is_none(), "--in-process runs the built-in controller; --controller needs the daemons");
+                anyhow::ensure!(a.live.live.is_none(), "--in-process has no live view (the live view needs the plant daemon)");
+                return run_in_process(&rig, &scenario, a.launch.duration, &dir);
             }
             let l = prepare(rig, scenario, a.mode, ("--duration", a.launch.duration), Some(dir), a.launch.controller, a.live.config())?;
             launch_and_report(&l, false, None)

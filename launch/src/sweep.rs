@@ -1,10 +1,11 @@
-//! `rig sweep`: a parameter study with the real daemons. Each case is the base scenario with some
-//! fields overridden (`--set section.field=v1,v2,...`), run in lockstep (deterministic: the same
-//! case gives the same numbers as `rig run --mode lockstep` of that scenario), and read back from
-//! its recording. One `--set` per axis; by default each axis is varied alone around the base
+//! `rig sweep`: a parameter study. Each case is the base scenario with some fields overridden
+//! (`--set section.field=v1,v2,...`), run in lockstep in process (`in_process.rs`: the plant's
+//! tick and the controller's step in one thread, bit-identical to `rig run --mode lockstep` of
+//! that scenario), one case per core at a time, and read back from its recording. One `--set` per axis; by default each axis is varied alone around the base
 //! scenario (a robustness table), with `--grid` over every combination.
 
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 
 use anyhow::Context;
 use serde::Serialize;
@@ -196,6 +197,62 @@ pub fn write_overridden(base_path: &Path, set: &[Axis], out: &Path) -> anyhow::R
     std::fs::write(out, toml::to_string(&doc)?).with_context(|| format!("writing {}", out.display()))?;
     scenario::Scenario::load(out).map_err(|e| blame_flags(e, &set_flags(set, &case)))?;
     Ok(out.to_path_buf())
+}
+
+/// The strip models of a sweep's cases, each loaded (or built) once and shared by every case
+/// with the same strip parameters (a bump height, say, is not one of them).
+pub struct SharedModels {
+    cache_dir: PathBuf,
+    models: Mutex<Vec<(strip::StripParams, Arc<strip::StripModel>)>>,
+}
+
+impl SharedModels {
+    pub fn new(cache_dir: &Path) -> SharedModels {
+        SharedModels { cache_dir: cache_dir.to_path_buf(), models: Mutex::new(Vec::new()) }
+    }
+
+    /// The plant's physics of `s`, its strip model shared. Cases with the same model wait for
+    /// the first to load it instead of loading it twice.
+    pub fn physics(&self, s: &scenario::Scenario) -> anyhow::Result<plant_sim::physics::Physics> {
+        if !s.strip.enabled {
+            return plant_sim::physics::Physics::with_strip_model(s, None);
+        }
+        let params = plant_sim::contact::strip_params(s);
+        let model = {
+            let mut models = self.models.lock().unwrap_or_else(|e| e.into_inner());
+            match models.iter().find(|(p, _)| *p == params) {
+                Some((_, m)) => m.clone(),
+                None => {
+                    let m = Arc::new(
+                        strip::StripModel::load_or_build_in(&self.cache_dir, &params)
+                            .with_context(|| format!("strip model (cache {})", self.cache_dir.display()))?,
+                    );
+                    models.push((params, m.clone()));
+                    m
+                }
+            }
+        };
+        plant_sim::physics::Physics::with_strip_model(s, Some(&model))
+    }
+}
+
+/// Run `case` over `cases` on one thread per core (std::thread::scope, each thread taking the
+/// next case until none is left); the results in the cases' order.
+pub fn run_cases<C: Sync, R: Send>(cases: &[C], case: impl Fn(usize, &C) -> R + Sync) -> Vec<R> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(cases.len()).max(1);
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<R>>> = Mutex::new((0..cases.len()).map(|_| None).collect());
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            scope.spawn(|| loop {
+                let n = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let Some(c) = cases.get(n) else { break };
+                let r = case(n, c);
+                results.lock().unwrap_or_else(|e| e.into_inner())[n] = Some(r);
+            });
+        }
+    });
+    results.into_inner().unwrap_or_else(|e| e.into_inner()).into_iter().flatten().collect()
 }
 
 #[cfg(test)]

@@ -15,6 +15,9 @@ pub mod physics;
 pub mod probe;
 pub mod rt;
 pub mod run;
+pub mod tick;
+
+pub use tick::PlantTick;
 
 /// The recorder API the loop writes to.
 pub use recordings as recording;

@@ -20,19 +20,16 @@
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
-use messages::ports::PlantPorts;
-use messages::{state_flags, ControllerDiagnostics, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
+use messages::liveness::PeerWatch;
+use messages::ports::{Answers, PlantPorts};
+use messages::PlantStatus;
 use scenario::Mode;
 
 use crate::arbiter::{Arbiter, ArbiterEvents, TakeoverReason};
-use crate::gate::{Decision, Gate};
-use crate::limits::ReflexLimits;
-use messages::liveness::PeerWatch;
-use messages::ports::Answers;
 use crate::histogram::Histogram;
-use crate::physics::Physics;
-use crate::recording::{ControllerStamps, EventKind, EventRecord, Recorder, StageStamps, StripRecord, TickRecord, TimingRecord};
+use crate::recording::{ControllerStamps, EventKind, EventRecord, Recorder, StageStamps, TimingRecord};
 use crate::rt;
+use crate::tick::PlantTick;
 
 /// Loop parameters.
 #[derive(Debug, Clone, Copy)]
@@ -82,6 +79,21 @@ pub struct LoopStats {
 }
 
 impl LoopStats {
+    /// The plant's counters at the end of a run (misses, safe stops, refusals, reflexes, their
+    /// first ticks, simulated time).
+    pub fn count_plant(&mut self, plant: &PlantTick) {
+        let g = plant.gate();
+        self.misses = g.total_misses();
+        self.safe_stops = g.safe_stops();
+        self.refusals = g.refusals();
+        self.reflexes = g.reflexes();
+        let f = plant.first_ticks();
+        self.first_safe_stop_tick = f.safe_stop;
+        self.first_reflex_tick = f.reflex;
+        self.first_refusal_tick = f.refusal;
+        self.sim_s = plant.physics().time_s();
+    }
+
     /// A run's statistics before its first tick.
     pub fn empty() -> LoopStats {
         LoopStats {
@@ -138,17 +150,14 @@ impl std::fmt::Write for StackText {
 /// Everything the loop touches.
 pub struct PlantLoop<'a> {
     pub ports: &'a PlantPorts,
-    pub physics: &'a mut Physics,
-    pub gate: &'a mut Gate,
+    /// Physics, gate and limits: the tick itself.
+    pub plant: &'a mut PlantTick,
     pub recorder: Option<&'a mut Recorder>,
     pub params: LoopParams,
-    /// Tick of the last miss/refusal log line (rate limit: one per second of ticks).
-    pub last_log_tick: Option<u64>,
     /// One controller at a time.
     pub arbiter: &'a mut Arbiter,
     /// Liveness of the active controller's node (None: no watcher, death only by silence).
     pub watch: Option<&'a PeerWatch>,
-    pub reflex_limits: ReflexLimits,
     /// The host-floor probe's latest wake-up, read once per tick (None: no probe).
     pub probe: Option<&'a crate::probe::Latest>,
 }
@@ -163,108 +172,6 @@ impl PlantLoop<'_> {
     fn event(&mut self, tick: u64, sim_time_s: f64, kind: EventKind, text: &str) {
         if let Some(r) = self.recorder.as_deref_mut() {
             r.record_event(&EventRecord::new(tick, sim_time_s, kind, text));
-        }
-    }
-
-    fn state(&self, tick: u64, prev: Option<&Decision>) -> JointState {
-        let mut flags = 0;
-        if let Some(d) = prev {
-            if d.held {
-                flags |= state_flags::TORQUE_HELD;
-            }
-            if d.refused.is_some() {
-                flags |= state_flags::TORQUE_REFUSED;
-            }
-        }
-        if self.params.mode == Mode::Lockstep {
-            flags |= state_flags::LOCKSTEP;
-        }
-        if self.physics.in_contact() {
-            flags |= state_flags::IN_CONTACT;
-        }
-        if self.gate.reflex_latched() {
-            flags |= state_flags::REFLEX;
-        }
-        if self.physics.limits().joint_in_end_stop(&self.physics.q()).is_some() {
-            flags |= state_flags::END_STOP;
-        }
-        JointState {
-            contract_version: CONTRACT_VERSION,
-            plant_status: self.gate.status() as u32,
-            tick,
-            sim_time_s: tick as f64 * self.params.period_ns as f64 * 1e-9,
-            q: self.physics.q().into(),
-            qd: self.physics.qd().into(),
-            tau_applied: self.gate.last_applied().into(),
-            period_s: self.params.period_ns as f64 * 1e-9,
-            flags,
-            consecutive_misses: self.gate.consecutive_misses(),
-            total_misses: self.gate.total_misses(),
-        }
-    }
-
-    fn wrench(&self, tick: u64) -> Wrench {
-        let (force, torque) = self.physics.wrench();
-        Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick, force, torque }
-    }
-
-    /// Turn the gate's rare events into recorded events and log lines.
-    fn report(&mut self, tick: u64, t: f64, d: &Decision, prev_refused: bool) {
-        let e = d.events;
-        // A flapping controller starts a streak every few ticks: record each, log one per second.
-        let ticks_per_s = 1_000_000_000 / self.params.period_ns.max(1);
-        let may_log = self.last_log_tick.is_none_or(|l| tick >= l + ticks_per_s);
-        if may_log && (e.miss_streak_started || (d.refused.is_some() && !prev_refused)) {
-            self.last_log_tick = Some(tick);
-        }
-        if let Some(r) = d.refused {
-            // Log and record the first refusal of a streak only (a bad controller refuses every tick).
-            if !prev_refused {
-                let mut s = StackText::new();
-                let _ = write!(s, "tick {tick}: {r}");
-                let kind = if matches!(r, crate::gate::Refusal::Version(_)) { EventKind::VersionMismatch } else { EventKind::TorqueRefused };
-                if may_log {
-                    tracing::warn!("{}", s.as_str());
-                }
-                self.event(tick, t, kind, s.as_str());
-            }
-        }
-        if e.miss_streak_started {
-            let mut s = StackText::new();
-            let _ = write!(s, "tick {tick}: no valid torque in time, holding the last one");
-            if may_log {
-                tracing::warn!("{} (total misses {})", s.as_str(), self.gate.total_misses());
-            }
-            self.event(tick, t, EventKind::Miss, s.as_str());
-        }
-        if e.safe_stop_entered {
-            let mut s = StackText::new();
-            if e.controller_fault {
-                let _ = write!(s, "tick {tick}: safe stop requested by the controller (fault)");
-            } else {
-                let _ = write!(s, "tick {tick}: safe stop after {} consecutive misses (gravity compensation + joint damping)", self.gate.consecutive_misses());
-            }
-            tracing::error!("{}", s.as_str());
-            self.event(tick, t, EventKind::SafeStop, s.as_str());
-        }
-        if e.safe_stop_cleared {
-            let mut s = StackText::new();
-            let _ = write!(s, "tick {tick}: safe stop cleared, controller resumes (blended in)");
-            tracing::info!("{}", s.as_str());
-            self.event(tick, t, EventKind::SafeStopCleared, s.as_str());
-        }
-        if let Some((old, new)) = e.controller_change {
-            let mut s = StackText::new();
-            match old {
-                Some(old) => {
-                    let _ = write!(s, "tick {tick}: controller {new:#x} takes over from {old:#x} (blended in)");
-                }
-                None => {
-                    let _ = write!(s, "tick {tick}: controller {new:#x} connected");
-                }
-            }
-            tracing::info!("{}", s.as_str());
-            self.event(tick, t, EventKind::ControllerChange, s.as_str());
         }
     }
 
@@ -313,32 +220,6 @@ impl PlantLoop<'_> {
         }
     }
 
-    /// After integrating: reflexes (safe stop at once) and end-stop entries of the new state,
-    /// which is tick `tick`'s.
-    fn check_limits(&mut self, tick: u64, t: f64, stats: &mut LoopStats, in_end_stop: &mut Option<usize>) {
-        let reflex = self.reflex_limits.check(&self.physics.qd(), self.physics.tcp_speed_mps(), self.physics.contact_force_n());
-        if let Some(r) = reflex {
-            if !self.gate.reflex_latched() {
-                self.gate.reflex();
-                stats.first_reflex_tick.get_or_insert(tick);
-                stats.first_safe_stop_tick.get_or_insert(tick);
-                let mut s = StackText::new();
-                let _ = write!(s, "tick {tick}: {r}: safe stop until the controller acknowledges");
-                tracing::error!("{}", s.as_str());
-                self.event(tick, t, EventKind::Reflex, s.as_str());
-            }
-        }
-        let stop = self.physics.limits().joint_in_end_stop(&self.physics.q());
-        if let (Some(j), None) = (stop, *in_end_stop) {
-            let [lo, hi] = self.physics.limits().range_rad[j];
-            let mut s = StackText::new();
-            let _ = write!(s, "tick {tick}: joint {} in its end stop at {:.4} rad (range {lo:.4} .. {hi:.4} rad)", j + 1, self.physics.q()[j]);
-            tracing::warn!("{}", s.as_str());
-            self.event(tick, t, EventKind::EndStop, s.as_str());
-        }
-        *in_end_stop = stop;
-    }
-
     /// Record the arbiter's rare events.
     fn report_arbiter(&mut self, tick: u64, t: f64, ev: &ArbiterEvents) {
         if let Some((origin, controller_id)) = ev.ignored {
@@ -364,11 +245,7 @@ impl PlantLoop<'_> {
         let p = self.params;
         let mut stats = LoopStats::empty();
         let mut answers = Answers::default();
-        let mut in_end_stop: Option<usize> = None;
         let mut gone_reported = false;
-        // Tick of the state whose answer was last applied: what `/joint_torque.answered_tick`
-        // records (the current tick when fresh, older when held).
-        let mut applied_answer_tick = recordings::NEVER_ANSWERED;
         // Overruns come in bursts on a stalling host: each is recorded in `/events`, but this
         // SCHED_FIFO thread writes at most one log line per second of ticks about them.
         let mut last_overrun_log: Option<(u64, u64)> = None;
@@ -381,10 +258,8 @@ impl PlantLoop<'_> {
             probe.set_grid(next_deadline_ns);
         }
         let mut paced = p.mode == Mode::Realtime;
-        let mut prev: Option<Decision> = None;
         let mut last_publish_ns: u64 = 0;
-        let mut tick: u64 = 0;
-        let mut strip = StripRecord::default();
+        let mut tick: u64 = self.plant.tick();
         // (wake time, tick) of the first tick a controller answered.
         let mut first_answer: Option<(u64, u64)> = None;
 
@@ -421,8 +296,7 @@ impl PlantLoop<'_> {
             let wake_ns = rt::now_mono_ns();
 
             // 2. Publish state and wrench of this tick.
-            let state = self.state(tick, prev.as_ref());
-            let wrench = self.wrench(tick);
+            let (state, wrench) = self.plant.outputs();
             let publish_wall_ns = rt::now_wall_ns();
             let mut publish_ns = rt::now_mono_ns();
             if let Err(e) = self.ports.publish(&state, &wrench) {
@@ -445,7 +319,7 @@ impl PlantLoop<'_> {
             let budget_ns = if paced { p.budget_ns } else { p.watchdog_ns };
             if paced {
                 self.wait_for_answers(tick, at(budget_end_ns), &mut answers);
-            } else if self.gate.status() == PlantStatus::WaitingForController {
+            } else if self.plant.gate().status() == PlantStatus::WaitingForController {
                 // Lockstep start-up: hold tick 0 until a controller answers it.
                 while !rt::stop_requested() {
                     self.wait_for_answers(tick, Instant::now() + LOCKSTEP_REPUBLISH, &mut answers);
@@ -487,12 +361,7 @@ impl PlantLoop<'_> {
                 };
                 tracing::error!("{}", s.as_str());
                 self.event(tick, sim_t, EventKind::ControllerEnded, s.as_str());
-                if self.gate.controller_gone() {
-                    let mut s = StackText::new();
-                    let _ = write!(s, "tick {tick}: safe stop: the controller is gone (gravity compensation + joint damping)");
-                    self.event(tick, sim_t, EventKind::SafeStop, s.as_str());
-                    stats.first_safe_stop_tick.get_or_insert(tick);
-                }
+                self.plant.controller_gone(self.recorder.as_deref_mut());
             }
             if arb_events.takeover.is_some() {
                 gone_reported = false;
@@ -502,13 +371,8 @@ impl PlantLoop<'_> {
                 stats.stopped_by_signal = true;
                 break;
             }
-            let decision = self.gate.decide(torque.as_ref(), &self.physics.gravity_torque(), &self.physics.qd());
-            if decision.events.safe_stop_entered {
-                stats.first_safe_stop_tick.get_or_insert(tick);
-            }
-            if decision.refused.is_some() {
-                stats.first_refusal_tick.get_or_insert(tick);
-            }
+            let outcome = self.plant.advance(torque.as_ref(), self.recorder.as_deref_mut());
+            let decision = outcome.decision;
             if p.mode == Mode::Lockstep {
                 // Watchdog expired: pace in real time until a controller answers again.
                 if !paced && decision.missed && torque.is_none() {
@@ -526,10 +390,6 @@ impl PlantLoop<'_> {
                     self.event(tick, sim_t, EventKind::ModeChange, "controller answers again: back to lockstep");
                 }
             }
-            self.report(tick, sim_t, &decision, prev.as_ref().is_some_and(|d| d.refused.is_some()));
-            self.physics.step_tick(&decision.tau);
-            self.check_limits(tick + 1, sim_t + p.period_ns as f64 * 1e-9, &mut stats, &mut in_end_stop);
-
             // 5. Record.
             let round_trip_ns = if torque.is_some() { recv_ns - publish_ns } else { 0 };
             if torque.is_some() && !decision.missed {
@@ -538,36 +398,17 @@ impl PlantLoop<'_> {
             if let Some(d) = diag.as_ref() {
                 stats.controller_compute.record(d.compute_time_ns);
             }
-            self.physics.fill_strip_record(&mut strip);
-            if let Some(t) = torque.as_ref().filter(|_| !decision.held) {
-                applied_answer_tick = t.tick;
-            }
-            let applied = JointTorque {
-                contract_version: CONTRACT_VERSION,
-                controller_status: torque.map_or(recordings::STATUS_NO_ANSWER, |t| t.controller_status),
-                tick: applied_answer_tick,
-                controller_id: self.gate.controller_id().unwrap_or(0),
-                tau: decision.tau.into(),
+            let timing = TimingRecord {
+                publish_wall_ns,
+                torque_receive_wall_ns: recv_wall_ns,
+                round_trip_ns,
+                period_ns,
+                missed: decision.missed,
+                plant_compute_ns: 0,
+                controller_compute_ns: diag.map_or(0, |d| d.compute_time_ns),
+                stages: None,
             };
-            let mut rec = TickRecord {
-                state,
-                wrench,
-                torque: applied,
-                torque_held: decision.held,
-                diag: diag.unwrap_or(ZERO_DIAG),
-                has_diag: diag.is_some(),
-                strip,
-                timing: TimingRecord {
-                    publish_wall_ns,
-                    torque_receive_wall_ns: recv_wall_ns,
-                    round_trip_ns,
-                    period_ns,
-                    missed: decision.missed,
-                    plant_compute_ns: 0,
-                    controller_compute_ns: diag.map_or(0, |d| d.compute_time_ns),
-                    stages: None,
-                },
-            };
+            let mut rec = crate::tick::tick_record(state, wrench, &outcome, diag, timing);
             let done_ns = rt::now_mono_ns();
             let plant_ns = pre_ns + (done_ns - recv_ns);
             rec.timing.plant_compute_ns = plant_ns;
@@ -600,7 +441,6 @@ impl PlantLoop<'_> {
                 r.record_tick_commanded(&rec, torque.as_ref());
             }
 
-            prev = Some(decision);
             tick += 1;
             if paced {
                 next_deadline_ns += p.period_ns;
@@ -608,22 +448,17 @@ impl PlantLoop<'_> {
         }
 
         stats.ticks = tick;
-        stats.misses = self.gate.total_misses();
-        stats.safe_stops = self.gate.safe_stops();
-        stats.refusals = self.gate.refusals();
-        stats.reflexes = self.gate.reflexes();
+        stats.count_plant(self.plant);
         stats.foreign_answers = self.arbiter.ignored_answers();
         stats.wall_s = (rt::now_mono_ns() - origin_ns) as f64 * 1e-9;
-        stats.sim_s = self.physics.time_s();
         if let Some((t0, k0)) = first_answer {
             stats.active_wall_s = (rt::now_mono_ns() - t0) as f64 * 1e-9;
             stats.active_sim_s = (tick - k0) as f64 * p.period_ns as f64 * 1e-9;
         }
 
         // Goodbye: the last state says ShuttingDown so controllers exit.
-        let mut last = self.state(tick, prev.as_ref());
-        last.plant_status = PlantStatus::ShuttingDown as u32;
-        let _ = self.ports.publish(&last, &self.wrench(tick));
+        let (last, last_wrench) = self.plant.goodbye();
+        let _ = self.ports.publish(&last, &last_wrench);
         let t_end = stats.sim_s;
         let mut s = StackText::new();
         let _ = write!(s, "plant stopped after {tick} ticks ({})", if stats.stopped_by_signal { "signal" } else { "duration reached" });
@@ -631,8 +466,6 @@ impl PlantLoop<'_> {
         stats
     }
 }
-
-const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics::zeroed(0);
 
 /// The deadline to run next after waking at `now_ns` for `next_deadline_ns`, and the number of
 /// whole periods skipped. Up to one period late, the tick runs late and the next ones catch up

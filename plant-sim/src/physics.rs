@@ -81,15 +81,23 @@ impl Physics {
     /// Build the plant of a scenario, at rest in the start pose (IK of [`start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
-        let contact = if s.strip.enabled {
+        let model = if s.strip.enabled {
             let params = crate::contact::strip_params(s);
-            let model = strip::StripModel::load_or_build_in(cache_dir, &params)
-                .with_context(|| format!("strip model (cache {})", cache_dir.display()))?;
-            let h = s.loop_.period_s / s.loop_.substeps as f64;
-            Some(crate::contact::StripContact::new(&model, crate::contact::ContactGeometry::from_scenario(s), h))
+            Some(strip::StripModel::load_or_build_in(cache_dir, &params).with_context(|| format!("strip model (cache {})", cache_dir.display()))?)
         } else {
             None
         };
+        Physics::with_strip_model(s, model.as_ref())
+    }
+
+    /// [`Physics::new`] with the strip model given (`rig sweep` loads each model once for all
+    /// its cases). `model` must be the one of `contact::strip_params(s)`; None without the strip.
+    pub fn with_strip_model(s: &Scenario, model: Option<&strip::StripModel>) -> anyhow::Result<Physics> {
+        anyhow::ensure!(model.is_some() == s.strip.enabled, "a strip model is needed exactly when strip.enabled");
+        let contact = model.map(|model| {
+            let h = s.loop_.period_s / s.loop_.substeps as f64;
+            crate::contact::StripContact::new(model, crate::contact::ContactGeometry::from_scenario(s), h)
+        });
         let robot = plant_robot(s);
         let target = start_tcp_pose(s);
         let q = robot

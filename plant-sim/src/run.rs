@@ -6,7 +6,6 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use scenario::{Mode, Scenario};
 
-use crate::gate::{Gate, GateConfig};
 use crate::loop_rt::{LoopParams, LoopStats, PlantLoop};
 use crate::physics::Physics;
 use crate::recording::{EventKind, EventRecord, Recorder, RecorderConfig};
@@ -119,6 +118,58 @@ impl RunSummary {
     }
 }
 
+/// What a recording's metadata says about the run besides the scenario.
+pub struct RecordingAbout<'a> {
+    pub rig: &'a str,
+    pub mode: Mode,
+    pub scenario_path: &'a Path,
+    /// The scenario file's text as read (recorded whole).
+    pub scenario_text: String,
+    /// `Some("in-process")` for a run without daemons; None: the plant's own (iceoryx2 or EGM).
+    pub transport: Option<&'a str>,
+}
+
+/// Start the recorder on `path` (its directory created) with the run's metadata and scene, as
+/// every driver of the plant records.
+pub fn open_recorder(path: &Path, about: &RecordingAbout, scenario: &Scenario, physics: &Physics, live: Option<recordings::LiveConfig>) -> anyhow::Result<Recorder> {
+    let l = &scenario.loop_;
+    let mode = about.mode;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut metadata = vec![
+        ("rig".to_string(), about.rig.to_string()),
+        ("mode".to_string(), format!("{mode:?}").to_lowercase()),
+        ("scenario_path".to_string(), about.scenario_path.display().to_string()),
+        ("scenario_toml".to_string(), about.scenario_text.clone()),
+        ("contract_version".to_string(), messages::CONTRACT_VERSION.to_string()),
+        ("period_s".to_string(), l.period_s.to_string()),
+        ("substeps".to_string(), l.substeps.to_string()),
+        ("integrator".to_string(), l.integrator.name().to_string()),
+    ];
+    if let Some(t) = about.transport {
+        metadata.push(("transport".to_string(), t.to_string()));
+    }
+    if scenario.egm.enabled {
+        let lag = crate::egm::servo::ServoParams::from_scenario(scenario).lag_s();
+        metadata.push((crate::recording::EGM_METADATA_KEY.to_string(), lag.to_string()));
+    }
+    // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
+    if let Some(c) = physics.contact() {
+        metadata.push(("centreline_z_m".to_string(), format!("{:?}", c.centreline_z_m())));
+    }
+    let cfg = RecorderConfig {
+        path: path.to_path_buf(),
+        queue_capacity: scenario.recording.queue_capacity,
+        chunk_size_bytes: scenario.recording.chunk_size_bytes,
+        metadata,
+        live,
+        scene: Some(scene_config(scenario, physics.contact())),
+        period_s: l.period_s,
+    };
+    Recorder::start(cfg).with_context(|| format!("starting the recorder on {}", path.display()))
+}
+
 /// Run the plant until the duration is reached or SIGINT/SIGTERM arrives.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let launcher = crate::launcher::Launcher::now();
@@ -155,16 +206,6 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     rt::install_controller_end_signal();
 
     let mut physics = Physics::new(&scenario, &opts.cache_dir)?;
-    let mut gate = Gate::new(GateConfig {
-        max_consecutive_misses: l.max_consecutive_misses,
-        blend_ticks: (l.takeover_blend_s / l.period_s).round() as u32,
-        safe_stop_damping_nms: crate::gate::safe_stop_damping(
-            l.safe_stop_damping_nms,
-            &physics.robot().mass_matrix(&physics.q()).diagonal(),
-            l.period_s,
-        ),
-        torque_limit_nm: robot::Robot::TORQUE_LIMIT_NM,
-    });
     let ports = messages::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
     // Liveness of the controllers' nodes, on its own thread (started before the loop's real-time
     // set-up, so it keeps the normal scheduling policy).
@@ -188,37 +229,8 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let recording = scenario.recording.enabled.then(|| opts.out.clone().unwrap_or_else(|| default_recording_path(&opts.rig)));
     let mut recorder = match &recording {
         Some(path) => {
-            if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-            }
-            let mut metadata = vec![
-                ("rig".to_string(), opts.rig.clone()),
-                ("mode".to_string(), format!("{mode:?}").to_lowercase()),
-                ("scenario_path".to_string(), opts.scenario_path.display().to_string()),
-                ("scenario_toml".to_string(), scenario_text),
-                ("contract_version".to_string(), messages::CONTRACT_VERSION.to_string()),
-                ("period_s".to_string(), l.period_s.to_string()),
-                ("substeps".to_string(), l.substeps.to_string()),
-                ("integrator".to_string(), l.integrator.name().to_string()),
-            ];
-            if scenario.egm.enabled {
-                let lag = crate::egm::servo::ServoParams::from_scenario(&scenario).lag_s();
-                metadata.push((crate::recording::EGM_METADATA_KEY.to_string(), lag.to_string()));
-            }
-            // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
-            if let Some(c) = physics.contact() {
-                metadata.push(("centreline_z_m".to_string(), format!("{:?}", c.centreline_z_m())));
-            }
-            let cfg = RecorderConfig {
-                path: path.clone(),
-                queue_capacity: scenario.recording.queue_capacity,
-                chunk_size_bytes: scenario.recording.chunk_size_bytes,
-                metadata,
-                live: opts.live.clone(),
-                scene: Some(scene_config(&scenario, physics.contact())),
-                period_s: l.period_s,
-            };
-            Some(Recorder::start(cfg).with_context(|| format!("starting the recorder on {}", path.display()))?)
+            let about = RecordingAbout { rig: &opts.rig, mode, scenario_path: &opts.scenario_path, scenario_text, transport: None };
+            Some(open_recorder(path, &about, &scenario, &physics, opts.live.clone())?)
         }
         None => None,
     };
@@ -288,16 +300,14 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         let (stats, es) = crate::egm::EgmLoop::new(&scenario, &mut physics, recorder.as_mut(), ep)?.run();
         (stats, Some(es))
     } else {
+        let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode);
         let stats = PlantLoop {
             ports: &ports,
-            physics: &mut physics,
-            gate: &mut gate,
+            plant: &mut plant,
             recorder: recorder.as_mut(),
             params,
-            last_log_tick: None,
             arbiter: &mut arbiter,
             watch: Some(&watch),
-            reflex_limits: crate::limits::ReflexLimits::from_scenario(&scenario),
             probe: probe.as_ref().map(|p| &*p.latest),
         }
         .run();

@@ -5,6 +5,9 @@
 //! refactored (commit 92cd897, `rig run <scenario> --mode lockstep`): a refactor that changes any
 //! state, wrench, torque or strip record of any tick changes the digest.
 //!
+//! The in-process run (`rig run --mode lockstep --in-process`: plant tick and controller step in
+//! one thread, no iceoryx2) must give the same digests: the transport is transparent.
+//!
 //! Build first: `cargo build --release --workspace --bins`.
 
 use std::time::Duration;
@@ -48,5 +51,21 @@ fn lockstep_recordings_are_bit_identical_to_those_before_the_refactor() {
     }
     for ((name, want), (_, have)) in EXPECTED.iter().zip(&got) {
         assert_eq!(have, want, "{name}: the lockstep physics changed");
+    }
+}
+
+#[test]
+fn in_process_runs_are_bit_identical_to_the_lockstep_daemons_before_the_refactor() {
+    let mut got = Vec::new();
+    for (name, _) in EXPECTED {
+        let rec = lockstep(name, &["--in-process"]);
+        assert!(rec.joint_state.len() > 1000, "{name}: a real run");
+        assert_eq!(rec.rig_metadata("transport"), Some("in-process"), "{name}: ran in process");
+        let d = physics_digest(&rec);
+        eprintln!("{name} in-process: {d}");
+        got.push((name, d));
+    }
+    for ((name, want), (_, have)) in EXPECTED.iter().zip(&got) {
+        assert_eq!(have, want, "{name}: the in-process run differs from the lockstep daemons");
     }
 }
