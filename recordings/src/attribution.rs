@@ -17,9 +17,10 @@ pub const COMPUTE_SHARE: f64 = 0.7;
 /// A probe wake-up later than this (the controller's wake share of the default 500 µs budget)
 /// is a host stall: what the probe counts and time-stamps.
 pub const HOST_STALL_NS: u64 = 100_000;
-/// Rows whose probe reports a missed tick is attributed from: the one before it, its own, and the
-/// four after it.
-const STALL_ROWS: usize = 6;
+/// Stalls that count for a missed tick are those overlapping its deadline's period before (more
+/// before skipped periods) up to this many periods after its deadline (the budget, the plant's
+/// finish and a late publish all end before that).
+const STALL_LOOKAHEAD_PERIODS: i64 = 2;
 /// The sliding window of the success rate, periods (100 ms at 1 kHz).
 pub const WINDOW_PERIODS: usize = 100;
 
@@ -240,6 +241,21 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
             host_periods[idx] = 1;
         }
     };
+    // Every wake-up the probe reported, on the run's time line (ns since its start), by start: a
+    // stall is reported at the plant's first tick after the probe woke, so one that held a CPU
+    // for 7 ms is reported 7 ticks after the first tick it cost; it is found by time, not by row.
+    // The probe's deadline before the one it was late for was met, so the stall began at most a
+    // probe period before that deadline.
+    let mut seen: Vec<Stall> = rows
+        .iter()
+        .filter_map(|r| r.timing.stages.filter(|o| o.probe && o.probe_late_ns > 0))
+        .map(|o| {
+            let at = o.deadline_since_start_ns as i64 + o.probe_stall_from_ns;
+            Stall { from_ns: at - o.probe_period_ns as i64, to_ns: at + o.probe_late_ns as i64 }
+        })
+        .collect();
+    seen.sort_by_key(|s| s.from_ns);
+    let longest_ns = seen.iter().map(|s| s.to_ns - s.from_ns).max().unwrap_or(0);
     for (i, r) in rows.iter().enumerate() {
         let t = &r.timing;
         let idx = match t.stages {
@@ -265,21 +281,18 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
             }
             if t.missed {
                 let ctrl = s.controller.or_else(|| late_stamps(i));
-                // The stalls reported with the tick before this one up to four after it, on this
-                // tick's time line: a stall is reported at the plant's first tick after the probe
-                // woke, so one that covered this tick's budget for a few ms comes a few ticks later.
-                let mut stalls = [Stall { from_ns: 0, to_ns: 0 }; STALL_ROWS];
-                let mut n = 0;
-                for r in &rows[i.saturating_sub(1)..rows.len().min(i + STALL_ROWS - 1)] {
-                    if let Some(o) = r.timing.stages.filter(|o| o.probe && o.probe_late_ns > 0) {
-                        // Seen from the deadline it was late for; the probe's deadline before that one
-                        // was met, so the stall began at most a probe period earlier.
-                        let at = o.probe_stall_from_ns + o.deadline_since_start_ns as i64 - s.deadline_since_start_ns as i64;
-                        stalls[n] = Stall { from_ns: at - o.probe_period_ns as i64, to_ns: at + o.probe_late_ns as i64 };
-                        n += 1;
-                    }
-                }
-                let c = cause_of(&s, ctrl, &stalls[..n]);
+                // The stalls around this tick, on its time line (ns from its deadline).
+                let d = s.deadline_since_start_ns as i64;
+                let p = period_ns as i64;
+                let (lo, hi) = (d - (i64::from(s.skipped_periods) + 1) * p, d + STALL_LOOKAHEAD_PERIODS * p);
+                let end = seen.partition_point(|x| x.from_ns < hi);
+                let begin = seen[..end].partition_point(|x| x.from_ns < lo - longest_ns);
+                let stalls: Vec<Stall> = seen[begin..end]
+                    .iter()
+                    .filter(|x| x.to_ns > lo)
+                    .map(|x| Stall { from_ns: x.from_ns - d, to_ns: x.to_ns - d })
+                    .collect();
+                let c = cause_of(&s, ctrl, &stalls);
                 host = c == Cause::Host;
                 a.by_cause[Cause::ALL.iter().position(|&x| x == c).unwrap()] += 1;
                 a.missed_ticks.push((r.tick, c));
@@ -528,6 +541,33 @@ mod tests {
             })
             .collect();
         attribute(&rows).cause_of_tick(5).unwrap()
+    }
+
+    /// A 7 ms stall of the controller's CPU from 125 µs after tick 5's deadline, as seen on
+    /// 2026-12-02 (ticks 14884-14890 of a `rig timing` run): ticks 5..=11 get no answer, and the
+    /// probe on that CPU reports its wake-up only with tick 12, seven rows after the first tick the
+    /// stall cost. Every one of those misses is the host's.
+    #[test]
+    fn a_long_stall_reported_many_ticks_later_takes_every_tick_it_covered() {
+        let rows: Vec<TimingRow> = (0..20u64)
+            .map(|k| match k {
+                5..=11 => row(k, StageStamps { probe_period_ns: 250_000, ..missed() }, true),
+                12 => row(
+                    k,
+                    StageStamps { probe_period_ns: 250_000, probe_late_ns: 6_866_799, probe_stall_from_ns: -6_875_000, ..stamps() },
+                    false,
+                ),
+                _ => row(k, StageStamps { probe_period_ns: 250_000, ..stamps() }, false),
+            })
+            .collect();
+        let a = attribute(&rows);
+        let causes: Vec<Cause> = (5..=11).map(|k| a.cause_of_tick(k).unwrap()).collect();
+        assert_eq!(causes, vec![Cause::Host; 7]);
+        // The same stall reported with no tick near it is nobody's excuse: a miss 5 ms after it
+        // ended is the controller's.
+        let mut rows = rows;
+        rows[17] = row(17, StageStamps { probe_period_ns: 250_000, ..missed() }, true);
+        assert_eq!(attribute(&rows).cause_of_tick(17), Some(Cause::NoAnswer));
     }
 
     #[test]
