@@ -1,11 +1,11 @@
 //! Cost of one controller tick (`controller::daemon::step`: references, kinematics, inverse
 //! dynamics, diagnostics) at the scenario's start pose, in free motion and in force control.
-use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use controller::daemon::step;
 use controller::gains::Gains;
 use controller::law::ControlLaw;
 use controller::model::{controller_robot, tool_down_rotation, TaskFrame};
 use controller::reference::{ReferenceGenerator, ReferenceParams};
+use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use messages::{JointState, Wrench, WrenchFrame, CONTRACT_VERSION};
 use robot::Vec6;
 use scenario::Scenario;
@@ -33,7 +33,8 @@ fn bench(c: &mut Criterion) {
         consecutive_misses: 0,
         total_misses: 0,
     };
-    let free = Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick: 0, force: [0.0; 3], torque: [0.0; 3] };
+    let free =
+        Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick: 0, force: [0.0; 3], torque: [0.0; 3] };
     let mut tick = 0;
     c.bench_function("controller_step_free_motion", |bn| {
         bn.iter(|| {

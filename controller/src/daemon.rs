@@ -121,14 +121,16 @@ fn controller_id(pid: u32) -> u64 {
 pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     let s = &cfg.scenario;
     let ports = ControllerPorts::open(&cfg.rig, "controller").with_context(|| format!("controller for rig {:?}", cfg.rig))?;
-    let mut controller = Controller::from_scenario(s).with_id(controller_id(std::process::id())).with_contract_version(cfg.contract_version);
+    let mut controller =
+        Controller::from_scenario(s).with_id(controller_id(std::process::id())).with_contract_version(cfg.contract_version);
     setup_realtime(cfg.rt_priority);
     tracing::info!(rig = %cfg.rig, contract_version = cfg.contract_version, "controller waiting for the plant");
 
     let started = Instant::now();
     let mut last_state_at: Option<Instant> = None;
     let mut last_tick: Option<u64> = None;
-    let mut wrench = Wrench { contract_version: cfg.contract_version, frame: WrenchFrame::BaseAtTcp as u32, tick: 0, force: [0.0; 3], torque: [0.0; 3] };
+    let mut wrench =
+        Wrench { contract_version: cfg.contract_version, frame: WrenchFrame::BaseAtTcp as u32, tick: 0, force: [0.0; 3], torque: [0.0; 3] };
     let mut summary = DaemonSummary::default();
     let mut compute_sum_ns: u128 = 0;
 

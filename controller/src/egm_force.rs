@@ -162,7 +162,8 @@ impl EgmForceLaw {
         } else {
             *y = p.y;
         }
-        let target = Isometry3::from_parts(Translation3::from(self.task.point_to_base(&p)), UnitQuaternion::from_matrix(&self.rot_base_tool));
+        let target =
+            Isometry3::from_parts(Translation3::from(self.task.point_to_base(&p)), UnitQuaternion::from_matrix(&self.rot_base_tool));
         let seed = self.last_q_ref.unwrap_or(inp.q);
         let q_ref = self.robot.ik_tcp(&target, &seed).unwrap_or(seed);
         self.last_q_ref = Some(q_ref);

@@ -121,7 +121,18 @@ pub const ENGAGE_FADE_S: f64 = 0.03;
 impl ControlLaw {
     /// `robot`: the controller's model; `rot_ref_base`: the constant tool orientation reference.
     pub fn new(robot: Robot, task: TaskFrame, gains: Gains, rot_ref_base: Matrix3<f64>) -> ControlLaw {
-        ControlLaw { robot, task, gains, rot_ref_base, integral_ns: 0.0, integrating: true, last_force_mode: false, engage_v0_mps: 0.0, engage_tick: 0, engage_ticks: 0 }
+        ControlLaw {
+            robot,
+            task,
+            gains,
+            rot_ref_base,
+            integral_ns: 0.0,
+            integrating: true,
+            last_force_mode: false,
+            engage_v0_mps: 0.0,
+            engage_tick: 0,
+            engage_ticks: 0,
+        }
     }
 
     pub fn robot(&self) -> &Robot {
@@ -378,7 +389,8 @@ mod tests {
     /// reference reaches `until`; `each` sees every tick's time, reference and law output.
     fn against_a_spring_wall(s: &Scenario, q0: Vec6, until: Phase, mut each: impl FnMut(f64, &TaskReference, &LawOutput)) {
         let k_s = s.controller.strip_stiffness_n_per_m;
-        let mut law = ControlLaw::new(controller_robot(s), TaskFrame::from_scenario(s), Gains::from_scenario(s, 10.0), tool_down_rotation());
+        let mut law =
+            ControlLaw::new(controller_robot(s), TaskFrame::from_scenario(s), Gains::from_scenario(s, 10.0), tool_down_rotation());
         let mut gen = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
         let surface_y = gen.params().start_task_m.y - 0.002;
         let (mut q, mut qd) = (q0, Vec6::zeros());

@@ -261,9 +261,17 @@ enum Contact {
     Pressing,
     /// Position-controlled descent from `y0` and vertical velocity `v0` (task y, signed) to the
     /// approach speed, started at `t0` ([`reapproach_profile`]).
-    Reapproach { t0: f64, y0: f64, v0: f64 },
+    Reapproach {
+        t0: f64,
+        y0: f64,
+        v0: f64,
+    },
     /// Stopping from `v0` at `y0`, started at `t0`.
-    Touchdown { t0: f64, y0: f64, v0: f64 },
+    Touchdown {
+        t0: f64,
+        y0: f64,
+        v0: f64,
+    },
 }
 
 /// The reference state machine. `update` is allocation-free.
@@ -467,7 +475,14 @@ impl ReferenceGenerator {
         self.contact = match self.contact {
             Contact::Pressing if force_y_n.abs() < 0.5 * p.contact_threshold_n => Contact::Reapproach { t0: t, y0: tcp_y_m, v0: 0.0 },
             Contact::Reapproach { t0, y0, v0 } if force_y_n.abs() > p.contact_threshold_n => {
-                let (d, v, _) = reapproach_profile(t - t0, p.approach_ramp_s, y0, v0, p.approach_speed_mps, p.start_task_m.y - p.approach_max_descent_m);
+                let (d, v, _) = reapproach_profile(
+                    t - t0,
+                    p.approach_ramp_s,
+                    y0,
+                    v0,
+                    p.approach_speed_mps,
+                    p.start_task_m.y - p.approach_max_descent_m,
+                );
                 Contact::Touchdown { t0: t, y0: y0 + d, v0: -v }
             }
             // The hand-over also waits for the re-engagement's fade to end: the arm must not
@@ -613,7 +628,14 @@ impl ReferenceGenerator {
                     }
                 }
                 Contact::Reapproach { t0, y0, v0 } => {
-                    let (d, v, a) = reapproach_profile(t - t0, p.approach_ramp_s, y0, v0, p.approach_speed_mps, p.start_task_m.y - p.approach_max_descent_m);
+                    let (d, v, a) = reapproach_profile(
+                        t - t0,
+                        p.approach_ramp_s,
+                        y0,
+                        v0,
+                        p.approach_speed_mps,
+                        p.start_task_m.y - p.approach_max_descent_m,
+                    );
                     r.force_mode = false;
                     r.pos_m.y = y0 + d;
                     r.vel_mps.y = v;
@@ -730,7 +752,17 @@ mod tests {
         }
         assert_eq!(
             seen,
-            vec![Phase::Settle, Phase::Approach, Phase::Touchdown, Phase::ForceRamp, Phase::Dwell, Phase::Roll, Phase::RampDown, Phase::Lift, Phase::Done]
+            vec![
+                Phase::Settle,
+                Phase::Approach,
+                Phase::Touchdown,
+                Phase::ForceRamp,
+                Phase::Dwell,
+                Phase::Roll,
+                Phase::RampDown,
+                Phase::Lift,
+                Phase::Done
+            ]
         );
         let last = prev.unwrap();
         assert!((last.pos_m.z - p.z_end_m).abs() < 1e-15);

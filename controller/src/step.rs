@@ -40,7 +40,8 @@ impl Controller {
     /// The scenario's controller: its robot model (without the plant's inertia scale), task
     /// frame, gains from the design rule, tool pointing down, references from `[trajectory]`.
     pub fn from_scenario(s: &Scenario) -> Controller {
-        let law = ControlLaw::new(controller_robot(s), TaskFrame::from_scenario(s), Gains::from_scenario(s, f64::NAN), tool_down_rotation());
+        let law =
+            ControlLaw::new(controller_robot(s), TaskFrame::from_scenario(s), Gains::from_scenario(s, f64::NAN), tool_down_rotation());
         Controller {
             law,
             reference: ReferenceGenerator::new(ReferenceParams::from_scenario(s)),

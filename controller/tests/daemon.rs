@@ -37,7 +37,12 @@ fn spawn(rig: &str, version: u32, dead: Duration) -> thread::JoinHandle<anyhow::
     spawn_with(rig, version, dead, Scenario::default())
 }
 
-fn spawn_with(rig: &str, version: u32, dead: Duration, scenario: Scenario) -> thread::JoinHandle<anyhow::Result<controller::daemon::DaemonSummary>> {
+fn spawn_with(
+    rig: &str,
+    version: u32,
+    dead: Duration,
+    scenario: Scenario,
+) -> thread::JoinHandle<anyhow::Result<controller::daemon::DaemonSummary>> {
     let mut cfg = DaemonConfig::new(rig, scenario);
     cfg.contract_version = version;
     cfg.startup_timeout = Duration::from_secs(5);

@@ -8,7 +8,17 @@ fn main() -> anyhow::Result<()> {
         let s = &r.joint_state[i];
         let t = &r.joint_torque[i];
         let st = &r.strip[i];
-        println!("{} st={} q={:?} qd={:?} tau={:?} f={:.3} bot={:.3} z={:.4}", s.tick, s.plant_status, s.q.map(|x| (x * 1e4).round() / 1e4), s.qd.map(|x| (x * 1e3).round() / 1e3), t.torque.tau.map(|x| x.round()), st.contact_force_n, st.bottom_force_n, st.wheel_z_m);
+        println!(
+            "{} st={} q={:?} qd={:?} tau={:?} f={:.3} bot={:.3} z={:.4}",
+            s.tick,
+            s.plant_status,
+            s.q.map(|x| (x * 1e4).round() / 1e4),
+            s.qd.map(|x| (x * 1e3).round() / 1e3),
+            t.torque.tau.map(|x| x.round()),
+            st.contact_force_n,
+            st.bottom_force_n,
+            st.wheel_z_m
+        );
     }
     Ok(())
 }

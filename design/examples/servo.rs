@@ -9,7 +9,10 @@ fn main() -> anyhow::Result<()> {
     let samples = run.samples;
     let every: usize = args.get(2).map_or(100, |x| x.parse().unwrap());
     for x in samples.iter().step_by(every) {
-        println!("{:.3} {:?} ref={:.3} f={:.3} bot={:.3} z={:.4}", x.t_s, x.phase, x.force_ref_n, x.contact_force_n, x.bottom_force_n, x.wheel_z_m);
+        println!(
+            "{:.3} {:?} ref={:.3} f={:.3} bot={:.3} z={:.4}",
+            x.t_s, x.phase, x.force_ref_n, x.contact_force_n, x.bottom_force_n, x.wheel_z_m
+        );
     }
     println!("{:?}", design::servo::tracking(&samples));
     Ok(())

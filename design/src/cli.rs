@@ -71,7 +71,12 @@ pub fn start_pose_effective_mass(s: &Scenario) -> anyhow::Result<f64> {
 }
 
 /// Frequency analysis at `z_a_m`: the loop of the scenario's gains on the strip model.
-pub fn analyse(s: &Scenario, model: &StripModel, z_a_m: f64, m_eff: f64) -> (Loop1, StripPoint, Vec<f64>, Vec<crate::plant1::Response>, Option<Margins>) {
+pub fn analyse(
+    s: &Scenario,
+    model: &StripModel,
+    z_a_m: f64,
+    m_eff: f64,
+) -> (Loop1, StripPoint, Vec<f64>, Vec<crate::plant1::Response>, Option<Margins>) {
     let gains = Gains::from_scenario(s, m_eff);
     let strip = StripPoint::new(model, z_a_m);
     let lp = Loop1 {

@@ -126,10 +126,8 @@ fn bulge_force_rate(s: &Scenario, k: f64) -> f64 {
 
 /// The summary lines `rig design --egm` prints.
 pub fn summary_text(r: &EgmDesignResult) -> String {
-    let mut s = format!(
-        "strip under the wheel at z_a = {:.1} mm with the contact in series: {:.0} N/m\n",
-        r.z_a_mm, r.series_stiffness_n_per_m
-    );
+    let mut s =
+        format!("strip under the wheel at z_a = {:.1} mm with the contact in series: {:.0} N/m\n", r.z_a_mm, r.series_stiffness_n_per_m);
     s += &format!(
         "EGM force loop (admittance b = {:.0} N s/m, delay {:.2} ms + low-pass {:.1} Hz):\n  rule (strip {:.0} N/m, controller.strip_stiffness_n_per_m): crossover {:.2} Hz, phase margin {:.1} deg\n",
         r.damping_ns_per_m,
@@ -140,10 +138,12 @@ pub fn summary_text(r: &EgmDesignResult) -> String {
         r.rule_phase_margin_deg
     );
     match &r.margins {
-        Some(m) => s += &format!(
-            "  reduced strip model at z_a = {:.1} mm: crossover {:.2} Hz, phase margin {:.1} deg, |S| peak {:.2} dB at {:.1} Hz\n",
-            r.z_a_mm, m.crossover_hz, m.phase_margin_deg, m.sensitivity_peak_db, m.sensitivity_peak_hz
-        ),
+        Some(m) => {
+            s += &format!(
+                "  reduced strip model at z_a = {:.1} mm: crossover {:.2} Hz, phase margin {:.1} deg, |S| peak {:.2} dB at {:.1} Hz\n",
+                r.z_a_mm, m.crossover_hz, m.phase_margin_deg, m.sensitivity_peak_db, m.sensitivity_peak_hz
+            )
+        }
         None => s += "  reduced strip model: |L| never crosses 1\n",
     }
     s += &format!(

@@ -36,12 +36,7 @@ pub fn margins(f_hz: &[f64], mag: &[f64], phase_deg: &[f64]) -> Option<Margins> 
             peak_f = f_hz[k];
         }
     }
-    Some(Margins {
-        crossover_hz,
-        phase_margin_deg: 180.0 + phase,
-        sensitivity_peak_db: 20.0 * peak.log10(),
-        sensitivity_peak_hz: peak_f,
-    })
+    Some(Margins { crossover_hz, phase_margin_deg: 180.0 + phase, sensitivity_peak_db: 20.0 * peak.log10(), sensitivity_peak_hz: peak_f })
 }
 
 /// Unwrap a phase sequence (degrees) so consecutive samples differ by less than 180°.
@@ -81,7 +76,12 @@ mod tests {
         let m = margins(&f, &mag, &ph).unwrap();
         let wc = ((a.powi(4) / 4.0 + k * k).sqrt() - a * a / 2.0).sqrt();
         let pm = 90.0 - (wc / a).atan().to_degrees();
-        assert!((m.crossover_hz - wc / std::f64::consts::TAU).abs() < 1e-4 * m.crossover_hz, "{} vs {}", m.crossover_hz, wc / std::f64::consts::TAU);
+        assert!(
+            (m.crossover_hz - wc / std::f64::consts::TAU).abs() < 1e-4 * m.crossover_hz,
+            "{} vs {}",
+            m.crossover_hz,
+            wc / std::f64::consts::TAU
+        );
         assert!((m.phase_margin_deg - pm).abs() < 1e-3, "{} vs {pm}", m.phase_margin_deg);
         // S = s(s + a)/(s² + a s + k): |S(jω)|² = ω²(ω² + a²)/((k − ω²)² + a²ω²); its maximum
         // found by dense evaluation of the closed form (independent of `margins`' arithmetic).

@@ -105,7 +105,9 @@ impl Loop1 {
         let delay = C64::from_polar(1.0, -w * self.period_s / 2.0);
         let l = pv * pi * delay;
         let one = C64::new(1.0, 0.0);
-        let rest = -90.0 - (self.m_d_kg * w / self.b_d_nspm).atan().to_degrees() - (self.k_i_per_s / w).atan().to_degrees()
+        let rest = -90.0
+            - (self.m_d_kg * w / self.b_d_nspm).atan().to_degrees()
+            - (self.k_i_per_s / w).atan().to_degrees()
             - (w * self.period_s / 2.0).to_degrees();
         Response {
             plant,
@@ -124,7 +126,15 @@ mod tests {
     use strip::StripParams;
 
     fn coarse() -> StripModel {
-        let p = StripParams { length_m: 0.02, element_m: 0.002, order: 40, bulge_amplitude_m: 0.2e-3, bulge_width_m: 0.01, bulge_center_m: 0.01, ..StripParams::default() };
+        let p = StripParams {
+            length_m: 0.02,
+            element_m: 0.002,
+            order: 40,
+            bulge_amplitude_m: 0.2e-3,
+            bulge_width_m: 0.01,
+            bulge_center_m: 0.01,
+            ..StripParams::default()
+        };
         StripModel::load_or_build(&p).unwrap()
     }
 

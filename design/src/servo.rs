@@ -36,11 +36,8 @@ pub struct Tracking {
 
 /// Tracking figures of the `Roll` phase of `samples`.
 pub fn tracking(samples: &[ServoSample]) -> Tracking {
-    let e: Vec<f64> = samples
-        .iter()
-        .filter(|s| s.phase == Phase::Roll)
-        .map(|s| (s.bottom_force_n.abs() - s.force_ref_n.abs()).abs())
-        .collect();
+    let e: Vec<f64> =
+        samples.iter().filter(|s| s.phase == Phase::Roll).map(|s| (s.bottom_force_n.abs() - s.force_ref_n.abs()).abs()).collect();
     if e.is_empty() {
         return Tracking::default();
     }

@@ -38,7 +38,14 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
         let f_meas = contact.contact_force_n();
         let r = reference.update(t, f_meas, y);
         contact.fill_record(&mut rec);
-        out.push(ServoSample { t_s: t, phase: r.phase, force_ref_n: r.force_y_n, contact_force_n: rec.contact_force_n, bottom_force_n: rec.bottom_force_n, wheel_z_m: rec.wheel_z_m });
+        out.push(ServoSample {
+            t_s: t,
+            phase: r.phase,
+            force_ref_n: r.force_y_n,
+            contact_force_n: rec.contact_force_n,
+            bottom_force_n: rec.bottom_force_n,
+            wheel_z_m: rec.wheel_z_m,
+        });
         let a = if r.force_mode {
             impedance_accel(gains, &mut integral, r.force_y_n, f_meas, vy, period)
         } else {
@@ -81,14 +88,23 @@ mod tests {
     /// the run goes through every phase to the lift-off.
     #[test]
     fn flat_strip_settles_on_the_reference_and_lifts_off() {
-        let p = StripParams { length_m: 0.02, element_m: 0.002, order: 40, bulge_amplitude_m: 0.0, bulge_width_m: 0.01, bulge_center_m: 0.01, ..StripParams::default() };
+        let p = StripParams {
+            length_m: 0.02,
+            element_m: 0.002,
+            order: 40,
+            bulge_amplitude_m: 0.0,
+            bulge_width_m: 0.01,
+            bulge_center_m: 0.01,
+            ..StripParams::default()
+        };
         let model = StripModel::load_or_build(&p).unwrap();
         let mut s = Scenario::default();
         s.strip.length_mm = 20.0;
         s.trajectory.z_end_mm = 18.0;
         s.trajectory.dwell_s = 0.5;
         s.controller.force_integral = false;
-        s.controller.strip_stiffness_n_per_m = 1.0 / crate::plant1::StripPoint::new(&model, 0.01).compliance(nalgebra::Complex::new(0.0, 0.0)).re;
+        s.controller.strip_stiffness_n_per_m =
+            1.0 / crate::plant1::StripPoint::new(&model, 0.01).compliance(nalgebra::Complex::new(0.0, 0.0)).re;
         let gains = Gains::from_scenario(&s, 20.0);
         let out = run_1dof(&s, &model, &gains, 20.0);
         let last_dwell = out.iter().filter(|x| x.phase == Phase::Dwell).last().expect("dwell phase");

@@ -51,5 +51,11 @@ pub fn compare_at(rec: &Recording, model: &StripModel, z_m: f64) -> anyhow::Resu
     }
     let peak = profile.iter().map(|p| p.2.abs()).fold(0.0, f64::max);
     let max_rel_diff = profile.iter().map(|p| (p.1 - p.2).abs()).fold(0.0, f64::max) / peak;
-    Ok(StressComparison { tick: rec.joint_state[i].tick, wheel_z_m: row.wheel_z_m, wheel_force_n: row.contact_force_n, profile, max_rel_diff })
+    Ok(StressComparison {
+        tick: rec.joint_state[i].tick,
+        wheel_z_m: row.wheel_z_m,
+        wheel_force_n: row.contact_force_n,
+        profile,
+        max_rel_diff,
+    })
 }

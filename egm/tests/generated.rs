@@ -18,5 +18,8 @@ fn generated_rust_is_prost_output_for_the_proto() {
         std::fs::write(&committed_path, &fresh).unwrap();
     }
     let committed = std::fs::read_to_string(&committed_path).unwrap_or_default();
-    assert!(committed == fresh, "src/abb.egm.rs is not prost's output for proto/egm.proto: run UPDATE_EGM_PROTO=1 cargo test -p egm --test generated");
+    assert!(
+        committed == fresh,
+        "src/abb.egm.rs is not prost's output for proto/egm.proto: run UPDATE_EGM_PROTO=1 cargo test -p egm --test generated"
+    );
 }

@@ -257,7 +257,11 @@ fn prepare(
         check_live(l, &parsed, &scenario)?;
     }
     let no_controller = controller.as_deref() == Some(Path::new("none"));
-    anyhow::ensure!(!no_controller || parsed.egm.enabled, "--controller none needs a scenario with [egm] enabled (an external EGM client answers the plant); {} has none", scenario.display());
+    anyhow::ensure!(
+        !no_controller || parsed.egm.enabled,
+        "--controller none needs a scenario with [egm] enabled (an external EGM client answers the plant); {} has none",
+        scenario.display()
+    );
     if let Some(p) = controller.as_ref().filter(|_| !no_controller) {
         check_controller(p)?;
     }
@@ -360,9 +364,7 @@ fn timing_scenario(dir: &Path, a: &TimingArgs) -> anyhow::Result<PathBuf> {
     let default = scenario::Scenario::default_file();
     let text = std::fs::read_to_string(&default).with_context(|| format!("reading {}", default.display()))?;
     let mut doc: toml::Table = text.parse().with_context(|| format!("parsing {}", default.display()))?;
-    let table = |doc: &mut toml::Table, k: &str| -> toml::Table {
-        doc.remove(k).and_then(|v| v.as_table().cloned()).unwrap_or_default()
-    };
+    let table = |doc: &mut toml::Table, k: &str| -> toml::Table { doc.remove(k).and_then(|v| v.as_table().cloned()).unwrap_or_default() };
     let mut strip = table(&mut doc, "strip");
     strip.insert("enabled".into(), false.into());
     doc.insert("strip".into(), strip.into());
@@ -419,7 +421,10 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
 /// every case reached its end but some with a safe stop, reflex, refused torque or an incomplete
 /// recording, 1 if a case failed, 130/143 if the sweep was interrupted.
 fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
-    anyhow::ensure!(a.launch.controller.is_none(), "rig sweep runs its cases in process with the built-in controller; --controller needs rig run");
+    anyhow::ensure!(
+        a.launch.controller.is_none(),
+        "rig sweep runs its cases in process with the built-in controller; --controller needs rig run"
+    );
     let base_path = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
     let base = sweep::load_base(&base_path)?;
     let dir = a.launch.out.unwrap_or_else(|| Path::new("runs").join(format!("sweep-{}", utc_stamp())));
@@ -524,10 +529,13 @@ fn main() {
                 None => {
                     let path = timing_scenario(&dir, &a)?;
                     // the spin flags go into the scenario: its ranges bound them, named as flags
-                    let flags: Vec<(String, String)> = [("loop.spin_wait_us", "--spin-us", a.spin_us), ("loop.controller_spin_us", "--controller-spin-us", a.controller_spin_us)]
-                        .into_iter()
-                        .filter_map(|(key, flag, v)| v.map(|us| (key.to_string(), format!("{flag} {us}"))))
-                        .collect();
+                    let flags: Vec<(String, String)> = [
+                        ("loop.spin_wait_us", "--spin-us", a.spin_us),
+                        ("loop.controller_spin_us", "--controller-spin-us", a.controller_spin_us),
+                    ]
+                    .into_iter()
+                    .filter_map(|(key, flag, v)| v.map(|us| (key.to_string(), format!("{flag} {us}"))))
+                    .collect();
                     scenario::Scenario::load(&path).map_err(|e| sweep::blame_flags(e, &flags))?;
                     path
                 }

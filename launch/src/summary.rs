@@ -24,12 +24,7 @@ pub fn run_summary(v: &Value) -> String {
         int(v, "overruns"),
         int(v, "drops")
     );
-    s += &format!(
-        "round trip  p50 {:.1} us  p99 {:.1} us  max {:.1} us\n",
-        num(v, "rt_p50_us"),
-        num(v, "rt_p99_us"),
-        num(v, "rt_max_us")
-    );
+    s += &format!("round trip  p50 {:.1} us  p99 {:.1} us  max {:.1} us\n", num(v, "rt_p50_us"), num(v, "rt_p99_us"), num(v, "rt_max_us"));
     s += &format!(
         "mode {}  simulated {:.3} s in {:.3} s wall ({:.1}x real time)\n",
         v.get("mode").and_then(Value::as_str).unwrap_or("?"),
@@ -104,7 +99,9 @@ pub fn status_line(code: i32, ending: &crate::supervise::Ending, plant_summary: 
     let found = plant_summary.map(incidents).unwrap_or_default();
     let also = if found.is_empty() { String::new() } else { format!("; plant: {}", found.join(", ")) };
     match ending {
-        Ending::Completed if plant_summary.is_none() => format!("rig: exit {code}: reached the end, but the plant printed no summary to tell how"),
+        Ending::Completed if plant_summary.is_none() => {
+            format!("rig: exit {code}: reached the end, but the plant printed no summary to tell how")
+        }
         Ending::Completed if found.is_empty() => {
             format!("rig: exit {code}: reached the end; no safe stop, reflex or refused torque; recording complete")
         }
@@ -224,7 +221,9 @@ mod tests {
         let v = serde_json::json!({"ticks": 1200, "misses": 3, "safe_stops": 1, "rt_p50_us": 21.5, "rt_p99_us": 60.25,
             "rt_max_us": 140.0, "recording": "runs/x/run.mcap", "drops": 0, "mode": "lockstep", "sim_s": 1.2, "wall_s": 0.05, "speed_factor": 24.0});
         let s = run_summary(&v) + &recording_summary(&v, None);
-        for needle in ["ticks 1200", "misses 3", "safe stops 1", "p50 21.5", "p99 60.2", "max 140.0", "recording   runs/x/run.mcap\n", "24.0x"] {
+        for needle in
+            ["ticks 1200", "misses 3", "safe stops 1", "p50 21.5", "p99 60.2", "max 140.0", "recording   runs/x/run.mcap\n", "24.0x"]
+        {
             assert!(s.contains(needle), "{needle:?} missing in {s}");
         }
         assert_eq!(s.matches("recording").count(), 1, "{s}");
@@ -254,7 +253,8 @@ mod tests {
 
     #[test]
     fn incidents_name_counts_and_first_ticks_and_misses_alone_are_none() {
-        let clean = serde_json::json!({"misses": 40, "safe_stops": 0, "reflexes": 0, "refusals": 0, "drops": 0, "recording_stopped_early": null});
+        let clean =
+            serde_json::json!({"misses": 40, "safe_stops": 0, "reflexes": 0, "refusals": 0, "drops": 0, "recording_stopped_early": null});
         assert!(incidents(&clean).is_empty());
         // An older plant without the new fields: nothing to report either.
         assert!(incidents(&serde_json::json!({"misses": 3})).is_empty());

@@ -149,7 +149,9 @@ pub fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
 fn describe(status: ExitStatus) -> String {
     use std::os::unix::process::ExitStatusExt;
     match (status.code(), status.signal()) {
-        (Some(c), _) if c == messages::host::EXIT_SHARED_MEMORY => format!("exit status {c} (shared memory unusable, see its message above)"),
+        (Some(c), _) if c == messages::host::EXIT_SHARED_MEMORY => {
+            format!("exit status {c} (shared memory unusable, see its message above)")
+        }
         (Some(c), _) if c == messages::host::EXIT_RIG_TAKEN => format!("exit status {c} (the rig name is taken)"),
         (Some(c), _) => format!("exit status {c}"),
         (None, Some(s)) => format!("killed by signal {s} ({})", signal_name(s)),
@@ -388,7 +390,12 @@ async fn plant_alone(plant: &mut Child) -> anyhow::Result<Ending> {
 }
 
 /// The outcome with the plant's summary line, once its stdout is read to the end.
-async fn finish(ending: Ending, reader: tokio::task::JoinHandle<String>, controller_exited_first: bool, plant_told: bool) -> anyhow::Result<Outcome> {
+async fn finish(
+    ending: Ending,
+    reader: tokio::task::JoinHandle<String>,
+    controller_exited_first: bool,
+    plant_told: bool,
+) -> anyhow::Result<Outcome> {
     let out = tokio::time::timeout(Duration::from_secs(5), reader).await.ok().and_then(|r| r.ok()).unwrap_or_default();
     let plant_summary = out.lines().rev().find_map(|line| serde_json::from_str::<serde_json::Value>(line).ok());
     // A plant that exits 0 after a stop signal did not reach its end: rig stopped it because the

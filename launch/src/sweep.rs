@@ -22,7 +22,8 @@ pub struct Axis {
 /// strings).
 pub fn parse_axis(s: &str) -> anyhow::Result<Axis> {
     let (key, values) = s.split_once('=').with_context(|| format!("--set {s:?}: expected section.field=v1,v2,..."))?;
-    let (section, field) = key.split_once('.').with_context(|| format!("--set {s:?}: the field needs its section, e.g. bulge.height_mm"))?;
+    let (section, field) =
+        key.split_once('.').with_context(|| format!("--set {s:?}: the field needs its section, e.g. bulge.height_mm"))?;
     anyhow::ensure!(!section.is_empty() && !field.is_empty() && !field.contains('.'), "--set {s:?}: expected section.field");
     let values: Vec<toml::Value> = values
         .split(',')
@@ -30,7 +31,11 @@ pub fn parse_axis(s: &str) -> anyhow::Result<Axis> {
             let v = v.trim();
             anyhow::ensure!(!v.is_empty(), "--set {s:?}: empty value");
             // a TOML scalar if it parses as one, else a bare string
-            Ok(format!("x = {v}").parse::<toml::Table>().ok().and_then(|mut t| t.remove("x")).unwrap_or_else(|| toml::Value::String(v.into())))
+            Ok(format!("x = {v}")
+                .parse::<toml::Table>()
+                .ok()
+                .and_then(|mut t| t.remove("x"))
+                .unwrap_or_else(|| toml::Value::String(v.into())))
         })
         .collect::<anyhow::Result<_>>()?;
     Ok(Axis { section: section.into(), field: field.into(), values })
@@ -278,7 +283,10 @@ mod tests {
     fn set_names_only_scenario_fields() {
         assert_eq!(parse_set("bulge.height_mm=0.1").unwrap(), parse_axis("bulge.height_mm=0.1").unwrap());
         let e = parse_set("bulge.heigth_mm=1").unwrap_err().to_string();
-        assert!(e.contains("--set \"bulge.heigth_mm=1\": no scenario field bulge.heigth_mm; [bulge] has height_mm, half_width_mm, center_mm"), "{e}");
+        assert!(
+            e.contains("--set \"bulge.heigth_mm=1\": no scenario field bulge.heigth_mm; [bulge] has height_mm, half_width_mm, center_mm"),
+            "{e}"
+        );
         let e = parse_set("loops.period_s=1").unwrap_err().to_string();
         assert!(e.contains("no scenario section [loops]; the sections are [loop],"), "{e}");
         // the syntax errors of parse_axis stay
@@ -357,7 +365,10 @@ mod tests {
         assert!(e.starts_with(&at) && e.contains(": field trajectory.roll_s = -1: must be in (0, ∞) s"), "{e}");
         // a field the override made invalid: blamed on the overrides
         let e = format!("{:#}", write_overridden(&base, &[parse_axis("strip.length_mm=20").unwrap()], &out).unwrap_err());
-        assert!(e.starts_with("the scenario with --set strip.length_mm=20: scenario file ") && e.contains("field trajectory.z_end_mm = 38"), "{e}");
+        assert!(
+            e.starts_with("the scenario with --set strip.length_mm=20: scenario file ") && e.contains("field trajectory.z_end_mm = 38"),
+            "{e}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

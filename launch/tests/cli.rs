@@ -114,13 +114,22 @@ fn bad_flag_values_are_refused_before_any_daemon_starts_naming_the_flag() {
         }
         cases.push(([cmd, &["--duration=-5"]].concat(), vec!["'--duration <DURATION>'", "> 0"]));
         // shorter than one 1 ms tick
-        cases.push(([cmd, &["--duration", "0.0004"]].concat(), vec!["--duration 0.0004: shorter than one control period (loop.period_s = 0.001 s"]));
+        cases.push((
+            [cmd, &["--duration", "0.0004"]].concat(),
+            vec!["--duration 0.0004: shorter than one control period (loop.period_s = 0.001 s"],
+        ));
         cases.push(([cmd, &["--out", under_a_file.as_str()]].concat(), vec!["--out ", "a-file/out"]));
     }
-    cases.push((vec!["run", "--controller", "/nonexistent/controller"], vec!["--controller /nonexistent/controller: No such file or directory (os error 2)"]));
+    cases.push((
+        vec!["run", "--controller", "/nonexistent/controller"],
+        vec!["--controller /nonexistent/controller: No such file or directory (os error 2)"],
+    ));
     cases.push((vec!["run", "--controller", "/"], vec!["--controller /: not a file"]));
     // sweep cases run in process with the built-in controller: any --controller is refused
-    cases.push((vec!["sweep", "--set", "bulge.height_mm=0.1", "--controller", "/nonexistent/controller"], vec!["rig sweep runs its cases in process with the built-in controller; --controller needs rig run"]));
+    cases.push((
+        vec!["sweep", "--set", "bulge.height_mm=0.1", "--controller", "/nonexistent/controller"],
+        vec!["rig sweep runs its cases in process with the built-in controller; --controller needs rig run"],
+    ));
     cases.push((vec!["run", "--mode", "fast"], vec!["'--mode <MODE>'"]));
     cases.push((vec!["run", "--set", "bulge.heigth_mm=1"], vec!["--set", "no scenario field bulge.heigth_mm; [bulge] has height_mm"]));
     cases.push((vec!["run", "--set", "loop.period_s"], vec!["--set", "expected section.field=v1,v2,..."]));
@@ -135,8 +144,21 @@ fn bad_flag_values_are_refused_before_any_daemon_starts_naming_the_flag() {
         cases.push((vec!["timing", "--controller-spin-us", v], vec!["'--controller-spin-us <CONTROLLER_SPIN_US>'"]));
     }
     // in range for the flag, out of range for the scenario field it sets
-    cases.push((vec!["timing", "--spin-us", "600"], vec!["--spin-us 600: scenario file ", "timing.toml, line ", ": field loop.spin_wait_us = 600: must be in [0, loop.torque_budget_us] = [0, 500] µs"]));
-    cases.push((vec!["timing", "--controller-spin-us", "500"], vec!["--controller-spin-us 500: scenario file ", ": field loop.controller_spin_us = 500: must be in [0, 5e5 loop.period_s) = [0, 500) µs"]));
+    cases.push((
+        vec!["timing", "--spin-us", "600"],
+        vec![
+            "--spin-us 600: scenario file ",
+            "timing.toml, line ",
+            ": field loop.spin_wait_us = 600: must be in [0, loop.torque_budget_us] = [0, 500] µs",
+        ],
+    ));
+    cases.push((
+        vec!["timing", "--controller-spin-us", "500"],
+        vec![
+            "--controller-spin-us 500: scenario file ",
+            ": field loop.controller_spin_us = 500: must be in [0, 5e5 loop.period_s) = [0, 500) µs",
+        ],
+    ));
     cases.push((vec!["timing", "--json", missing_dir_json.as_str()], vec!["--json ", "no-such-dir does not exist"]));
     cases.push((vec!["timing", "--json", "/"], vec!["--json /: is a directory"]));
     for (n, (args, says)) in cases.iter().enumerate() {
@@ -151,27 +173,57 @@ fn set_overrides_are_checked_like_file_values_and_name_the_flag() {
     let out = |n: usize| sb.dir.join(format!("out-{n}"));
     let cases: Vec<(Vec<String>, Vec<String>)> = vec![
         // the findings of issue 12
-        (strings(&["run", "--set", "trajectory.force_ref_n=nan"]), vec![
-            format!("--set trajectory.force_ref_n=nan: scenario file {}, line ", out(0).join("scenario.toml").display()),
-            ": field trajectory.force_ref_n = NaN: must be a finite number in (-safety.max_contact_force_n, 0) N".into(),
-        ]),
-        (strings(&["run", "--set", "bulge.height_mm=100"]), vec![
-            format!("--set bulge.height_mm=100: scenario file {}, line ", out(1).join("scenario.toml").display()),
-            ": field bulge.height_mm = 100: must be in (-8, 8) mm".into(),
-        ]),
+        (
+            strings(&["run", "--set", "trajectory.force_ref_n=nan"]),
+            vec![
+                format!("--set trajectory.force_ref_n=nan: scenario file {}, line ", out(0).join("scenario.toml").display()),
+                ": field trajectory.force_ref_n = NaN: must be a finite number in (-safety.max_contact_force_n, 0) N".into(),
+            ],
+        ),
+        (
+            strings(&["run", "--set", "bulge.height_mm=100"]),
+            vec![
+                format!("--set bulge.height_mm=100: scenario file {}, line ", out(1).join("scenario.toml").display()),
+                ": field bulge.height_mm = 100: must be in (-8, 8) mm".into(),
+            ],
+        ),
         (strings(&["run", "--set", "trajectory.force_ref_n=-50"]), strings(&["--set trajectory.force_ref_n=-50: ", "= (-40, 0) N"])),
-        (strings(&["run", "--set", "loop.substeps=0"]), strings(&["--set loop.substeps=0: ", "field loop.substeps = 0: must be in [1, 1000]"])),
-        (strings(&["run", "--set", "loop.substeps=2.5"]), strings(&["--set loop.substeps=2.5: ", "field loop.substeps = 2.5: must be a whole number, not a float"])),
-        (strings(&["run", "--set", "trajectory.roll_s=fast"]), strings(&["--set trajectory.roll_s=\"fast\": ", "field trajectory.roll_s = \"fast\": must be a number (s), not a string"])),
-        (strings(&["run", "--set", "loop.period_s=-1"]), strings(&["--set loop.period_s=-1: ", "field loop.period_s = -1: must be in (0, 0.1] s"])),
+        (
+            strings(&["run", "--set", "loop.substeps=0"]),
+            strings(&["--set loop.substeps=0: ", "field loop.substeps = 0: must be in [1, 1000]"]),
+        ),
+        (
+            strings(&["run", "--set", "loop.substeps=2.5"]),
+            strings(&["--set loop.substeps=2.5: ", "field loop.substeps = 2.5: must be a whole number, not a float"]),
+        ),
+        (
+            strings(&["run", "--set", "trajectory.roll_s=fast"]),
+            strings(&["--set trajectory.roll_s=\"fast\": ", "field trajectory.roll_s = \"fast\": must be a number (s), not a string"]),
+        ),
+        (
+            strings(&["run", "--set", "loop.period_s=-1"]),
+            strings(&["--set loop.period_s=-1: ", "field loop.period_s = -1: must be in (0, 0.1] s"]),
+        ),
         // another field made invalid: both named
-        (strings(&["run", "--set", "strip.length_mm=20"]), strings(&["the scenario with --set strip.length_mm=20: ", "field trajectory.z_end_mm = 38: must be in (trajectory.z_start_mm, strip.length_mm] = (2, 20] mm"])),
+        (
+            strings(&["run", "--set", "strip.length_mm=20"]),
+            strings(&[
+                "the scenario with --set strip.length_mm=20: ",
+                "field trajectory.z_end_mm = 38: must be in (trajectory.z_start_mm, strip.length_mm] = (2, 20] mm",
+            ]),
+        ),
         // a sweep: the bad case is named, and nothing runs before it is checked
-        (strings(&["sweep", "--set", "bulge.height_mm=0.1,100"]), vec![
-            format!("--set bulge.height_mm=100: scenario file {}, line ", out(8).join("case-01").join("scenario.toml").display()),
-            ": field bulge.height_mm = 100: must be in (-8, 8) mm".into(),
-        ]),
-        (strings(&["sweep", "--set", "trajectory.force_ref_n=-10,nan", "--grid"]), strings(&["--set trajectory.force_ref_n=nan: ", "case-01", "field trajectory.force_ref_n = NaN"])),
+        (
+            strings(&["sweep", "--set", "bulge.height_mm=0.1,100"]),
+            vec![
+                format!("--set bulge.height_mm=100: scenario file {}, line ", out(8).join("case-01").join("scenario.toml").display()),
+                ": field bulge.height_mm = 100: must be in (-8, 8) mm".into(),
+            ],
+        ),
+        (
+            strings(&["sweep", "--set", "trajectory.force_ref_n=-10,nan", "--grid"]),
+            strings(&["--set trajectory.force_ref_n=nan: ", "case-01", "field trajectory.force_ref_n = NaN"]),
+        ),
     ];
     for (n, (args, says)) in cases.iter().enumerate() {
         assert_refused(&sb, n, args, says);
@@ -191,11 +243,23 @@ fn bad_scenario_files_are_refused_naming_file_line_and_field() {
     let nan = write("nan.toml", "[trajectory]\nforce_ref_n = nan\n");
     let typed = write("typed.toml", "[loop]\n\nsubsteps = \"ten\"\n");
     let cases: Vec<(Vec<String>, Vec<String>)> = vec![
-        (vec!["run".into(), bulge.clone()], vec![format!("rig: error: scenario file {bulge}, line 3: field bulge.height_mm = 100: must be in (-8, 8) mm")]),
-        (vec!["run".into(), nan.clone()], vec![format!("scenario file {nan}, line 2: field trajectory.force_ref_n = NaN: must be a finite number")]),
-        (vec!["run".into(), typed.clone()], vec![format!("scenario file {typed}, line 3: field loop.substeps = \"ten\": must be a whole number, not a string")]),
+        (
+            vec!["run".into(), bulge.clone()],
+            vec![format!("rig: error: scenario file {bulge}, line 3: field bulge.height_mm = 100: must be in (-8, 8) mm")],
+        ),
+        (
+            vec!["run".into(), nan.clone()],
+            vec![format!("scenario file {nan}, line 2: field trajectory.force_ref_n = NaN: must be a finite number")],
+        ),
+        (
+            vec!["run".into(), typed.clone()],
+            vec![format!("scenario file {typed}, line 3: field loop.substeps = \"ten\": must be a whole number, not a string")],
+        ),
         (vec!["timing".into(), "--scenario".into(), bulge.clone()], vec![format!("scenario file {bulge}, line 3: field bulge.height_mm")]),
-        (vec!["sweep".into(), nan.clone(), "--set".into(), "bulge.height_mm=0.1".into()], vec![format!("scenario file {nan}, line 2: field trajectory.force_ref_n")]),
+        (
+            vec!["sweep".into(), nan.clone(), "--set".into(), "bulge.height_mm=0.1".into()],
+            vec![format!("scenario file {nan}, line 2: field trajectory.force_ref_n")],
+        ),
     ];
     for (n, (args, says)) in cases.iter().enumerate() {
         assert_refused(&sb, n, args, says);
@@ -206,8 +270,20 @@ fn bad_scenario_files_are_refused_naming_file_line_and_field() {
 #[test]
 fn a_missing_scenario_file_prints_its_os_error_once() {
     let sb = sandbox("missing");
-    for (n, args) in [strings(&["run", "/nonexistent/scenario.toml"]), strings(&["sweep", "/nonexistent/scenario.toml", "--set", "bulge.height_mm=0.1"]), strings(&["timing", "--scenario", "/nonexistent/scenario.toml"])].iter().enumerate() {
-        assert_refused(&sb, n, args, &strings(&["rig: error: cannot read scenario file /nonexistent/scenario.toml: No such file or directory (os error 2)\n"]));
+    for (n, args) in [
+        strings(&["run", "/nonexistent/scenario.toml"]),
+        strings(&["sweep", "/nonexistent/scenario.toml", "--set", "bulge.height_mm=0.1"]),
+        strings(&["timing", "--scenario", "/nonexistent/scenario.toml"]),
+    ]
+    .iter()
+    .enumerate()
+    {
+        assert_refused(
+            &sb,
+            n,
+            args,
+            &strings(&["rig: error: cannot read scenario file /nonexistent/scenario.toml: No such file or directory (os error 2)\n"]),
+        );
         let r = rig(&sb, 100 + n, args);
         assert_eq!(r.stderr.matches("os error 2").count(), 1, "{}", r.stderr);
         assert_eq!(r.stderr.matches("No such file or directory").count(), 1, "{}", r.stderr);

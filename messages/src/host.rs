@@ -111,7 +111,10 @@ fn private_dir(dir: &Path) -> Result<(), HostError> {
     }
     if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty() && !p.exists()) {
         std::fs::DirBuilder::new().recursive(true).mode(0o700).create(parent).map_err(|e| {
-            shm_error(format!("cannot create {} for the rig's iceoryx2 files ({e}); set {STATE_DIR_ENV} to a directory of yours", parent.display()))
+            shm_error(format!(
+                "cannot create {} for the rig's iceoryx2 files ({e}); set {STATE_DIR_ENV} to a directory of yours",
+                parent.display()
+            ))
         })?;
     }
     match std::fs::DirBuilder::new().mode(0o700).create(dir) {
@@ -204,8 +207,9 @@ pub fn iceoryx2_config() -> Result<&'static Config, HostError> {
             let wanted = std::fs::read_to_string(&path).map_err(|e| format!("cannot read {} ({e})", path.display()))?;
             let fp = FilePath::new(path.as_os_str().as_encoded_bytes())
                 .map_err(|e| format!("{} is not a path iceoryx2 accepts ({e:?}); set {STATE_DIR_ENV} to a shorter one", path.display()))?;
-            let cfg = Config::setup_global_config_from_file(&fp)
-                .map_err(|e| format!("iceoryx2 refused its configuration {} ({e:?}); remove the file, the next daemon writes it anew", path.display()))?;
+            let cfg = Config::setup_global_config_from_file(&fp).map_err(|e| {
+                format!("iceoryx2 refused its configuration {} ({e:?}); remove the file, the next daemon writes it anew", path.display())
+            })?;
             // setup_global_config_from_file returns an earlier global config silently.
             if !wanted.contains(&format!("prefix = \"{}\"", cfg.global.prefix)) {
                 return Err(format!("iceoryx2 was used before the rig loaded {} (a bug of this program)", path.display()));

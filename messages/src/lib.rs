@@ -10,10 +10,10 @@
 //! IRB 2400 (thesis Table 7.1). Every record carries [`CONTRACT_VERSION`] in its first field; a
 //! peer with another version is refused (see [`check_version`]).
 
-#[cfg(feature = "logging")]
-pub mod logging;
 pub mod host;
 pub mod liveness;
+#[cfg(feature = "logging")]
+pub mod logging;
 pub mod ports;
 pub mod qos;
 pub mod services;

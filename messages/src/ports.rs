@@ -74,10 +74,7 @@ pub(crate) fn node(rig: &str, role: &str) -> Result<Node<ipc::Service>, PortErro
 
 fn service_name(rig: &str, svc: &str) -> Result<ServiceName, PortError> {
     services::validate_rig_name(rig).map_err(PortError)?;
-    services::service_name(rig, svc)
-        .as_str()
-        .try_into()
-        .map_err(|e| err(rig, svc, e))
+    services::service_name(rig, svc).as_str().try_into().map_err(|e| err(rig, svc, e))
 }
 
 /// Open (or create) publish-subscribe service `svc` of rig `rig` with the contract's QoS, one
@@ -125,10 +122,7 @@ fn subscriber<T: core::fmt::Debug + ZeroCopySend + Copy>(
     f: &iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
     rig: &str,
 ) -> Result<Sub<T>, PortError> {
-    f.subscriber_builder()
-        .buffer_size(qos::SUBSCRIBER_BUFFER)
-        .create()
-        .map_err(|e| err(rig, "create subscriber", e))
+    f.subscriber_builder().buffer_size(qos::SUBSCRIBER_BUFFER).create().map_err(|e| err(rig, "create subscriber", e))
 }
 
 /// Drain a subscriber and keep the newest sample (older ones are stale by construction).
@@ -141,10 +135,7 @@ fn newest<T: core::fmt::Debug + ZeroCopySend + Copy>(sub: &Sub<T>) -> Option<T> 
 }
 
 /// Drain a subscriber, keeping the newest sample whose `tick` satisfies `want`.
-fn newest_matching<T: core::fmt::Debug + ZeroCopySend + Copy>(
-    sub: &Sub<T>,
-    mut want: impl FnMut(&T) -> bool,
-) -> Option<T> {
+fn newest_matching<T: core::fmt::Debug + ZeroCopySend + Copy>(sub: &Sub<T>, mut want: impl FnMut(&T) -> bool) -> Option<T> {
     let mut last = None;
     while let Ok(Some(s)) = sub.receive() {
         if want(&s) {

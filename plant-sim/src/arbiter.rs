@@ -55,7 +55,13 @@ pub struct Arbiter {
 
 impl Arbiter {
     pub fn new(takeover_after_misses: u32) -> Arbiter {
-        Arbiter { takeover_after_misses: takeover_after_misses.max(1), active: None, active_missed: 0, seen: [None; SEEN], ignored_answers: 0 }
+        Arbiter {
+            takeover_after_misses: takeover_after_misses.max(1),
+            active: None,
+            active_missed: 0,
+            seen: [None; SEEN],
+            ignored_answers: 0,
+        }
     }
 
     /// The active controller's publisher id.

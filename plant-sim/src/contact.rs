@@ -636,7 +636,12 @@ mod tests {
         assert!(c.in_contact());
         let mut r = StripRecord::default();
         c.fill_record(&mut r);
-        assert!((r.bottom_force_n - c.contact_force_n()).abs() < 1e-4 * p, "bottom {} vs contact {}", r.bottom_force_n, c.contact_force_n());
+        assert!(
+            (r.bottom_force_n - c.contact_force_n()).abs() < 1e-4 * p,
+            "bottom {} vs contact {}",
+            r.bottom_force_n,
+            c.contact_force_n()
+        );
         assert!((r.wheel_z_m - z).abs() < 1e-12);
         // The surface under the wheel sits where the penalty spring says.
         let surface = STRIP_TOP_HEIGHT_M + r.top_displacement_m;
@@ -696,7 +701,11 @@ mod tests {
         let traj = |t: f64| -> (f64, f64) {
             // lowest point height and velocity: down 10 mm/s from +0.5 mm for 80 ms, then back up
             let (y0, v) = (STRIP_TOP_HEIGHT_M + 0.5e-3, 0.01);
-            if t < 0.08 { (y0 - v * t, -v) } else { (y0 - v * 0.08 + v * (t - 0.08), v) }
+            if t < 0.08 {
+                (y0 - v * t, -v)
+            } else {
+                (y0 - v * 0.08 + v * (t - 0.08), v)
+            }
         };
         let history = |h: f64| -> Vec<f64> {
             let mut c = StripContact::new(&model, g, h);

@@ -29,11 +29,9 @@ impl std::fmt::Display for Refusal {
         match self {
             Refusal::Version(v) => write!(f, "torque refused: {v}"),
             Refusal::NotFinite { joint } => write!(f, "torque refused: joint {} torque is not finite", joint + 1),
-            Refusal::OutOfLimit { joint, value_nm, limit_nm } => write!(
-                f,
-                "torque refused: joint {} torque {value_nm:.1} N m exceeds the limit {limit_nm:.1} N m",
-                joint + 1
-            ),
+            Refusal::OutOfLimit { joint, value_nm, limit_nm } => {
+                write!(f, "torque refused: joint {} torque {value_nm:.1} N m exceeds the limit {limit_nm:.1} N m", joint + 1)
+            }
         }
     }
 }

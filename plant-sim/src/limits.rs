@@ -7,8 +7,8 @@
 //! and allocation-free: it runs on the 1 kHz path.
 
 use robot::params::{
-    DRIVE_FULL_BRAKE_SPEED_RATIO, DRIVE_KNEE_SPEED_RATIO, DRIVE_ZERO_TORQUE_SPEED_RATIO, END_STOP_PENETRATION_AT_TORQUE_LIMIT_RAD, POSITION_LIMIT_RAD,
-    TORQUE_LIMIT_NM, VELOCITY_LIMIT_RADPS,
+    DRIVE_FULL_BRAKE_SPEED_RATIO, DRIVE_KNEE_SPEED_RATIO, DRIVE_ZERO_TORQUE_SPEED_RATIO, END_STOP_PENETRATION_AT_TORQUE_LIMIT_RAD,
+    POSITION_LIMIT_RAD, TORQUE_LIMIT_NM, VELOCITY_LIMIT_RADPS,
 };
 use robot::Vec6;
 
@@ -131,13 +131,9 @@ pub enum Reflex {
 impl std::fmt::Display for Reflex {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match *self {
-            Reflex::JointSpeed { joint, value_radps, limit_radps } => write!(
-                f,
-                "reflex: joint {} speed {:.3} rad/s exceeds its limit {:.3} rad/s",
-                joint + 1,
-                value_radps,
-                limit_radps
-            ),
+            Reflex::JointSpeed { joint, value_radps, limit_radps } => {
+                write!(f, "reflex: joint {} speed {:.3} rad/s exceeds its limit {:.3} rad/s", joint + 1, value_radps, limit_radps)
+            }
             Reflex::TcpSpeed { value_mps, limit_mps } => {
                 write!(f, "reflex: TCP speed {value_mps:.3} m/s exceeds the limit {limit_mps:.3} m/s")
             }

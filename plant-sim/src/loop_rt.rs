@@ -224,15 +224,23 @@ impl PlantLoop<'_> {
     fn report_arbiter(&mut self, tick: u64, t: f64, ev: &ArbiterEvents) {
         if let Some((origin, controller_id)) = ev.ignored {
             let mut s = StackText::new();
-            let _ = write!(s, "tick {tick}: ignoring torques of publisher {:#x} (controller_id {controller_id:#x}): another controller is active", origin as u64);
+            let _ = write!(
+                s,
+                "tick {tick}: ignoring torques of publisher {:#x} (controller_id {controller_id:#x}): another controller is active",
+                origin as u64
+            );
             tracing::warn!("{}", s.as_str());
             self.event(tick, t, EventKind::ForeignTorque, s.as_str());
         }
         if let Some((Some(old), new, why)) = ev.takeover {
             let mut s = StackText::new();
             let _ = match why {
-                TakeoverReason::Missed(n) => write!(s, "tick {tick}: publisher {:#x} takes over from {:#x}, which missed {n} ticks in a row", new as u64, old as u64),
-                TakeoverReason::Gone => write!(s, "tick {tick}: publisher {:#x} takes over from {:#x}, whose node is gone", new as u64, old as u64),
+                TakeoverReason::Missed(n) => {
+                    write!(s, "tick {tick}: publisher {:#x} takes over from {:#x}, which missed {n} ticks in a row", new as u64, old as u64)
+                }
+                TakeoverReason::Gone => {
+                    write!(s, "tick {tick}: publisher {:#x} takes over from {:#x}, whose node is gone", new as u64, old as u64)
+                }
                 TakeoverReason::First => write!(s, "tick {tick}: publisher {:#x} takes over", new as u64),
             };
             tracing::info!("{}", s.as_str());
@@ -497,7 +505,7 @@ mod tests {
     #[test]
     fn a_stall_skips_whole_periods_and_lands_on_the_grid_before_now() {
         let d = 7 * T + 123; // grid phase 123 ns
-        // 3.4 periods late: 3 deadlines dropped, the next one is 0.4 periods in the past.
+                             // 3.4 periods late: 3 deadlines dropped, the next one is 0.4 periods in the past.
         let (d2, k) = skip_ahead(d + 3_400_000, d, T);
         assert_eq!((d2, k), (d + 3 * T, 3));
         // Any lateness beyond a period: on the grid, not after now, less than a period before it.

@@ -83,7 +83,10 @@ impl Physics {
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
         let model = if s.strip.enabled {
             let params = crate::contact::strip_params(s);
-            Some(strip::StripModel::load_or_build_in(cache_dir, &params).with_context(|| format!("strip model (cache {})", cache_dir.display()))?)
+            Some(
+                strip::StripModel::load_or_build_in(cache_dir, &params)
+                    .with_context(|| format!("strip model (cache {})", cache_dir.display()))?,
+            )
         } else {
             None
         };
@@ -358,7 +361,10 @@ mod tests {
             if e10 > 1e-12 * t_peak {
                 let ratio = e5 / e10;
                 let expect = (1u32 << order) as f64;
-                assert!(ratio > 0.625 * expect && ratio < 1.5 * expect, "{integrator:?}: energy error ratio {ratio}, order {order} gives {expect}");
+                assert!(
+                    ratio > 0.625 * expect && ratio < 1.5 * expect,
+                    "{integrator:?}: energy error ratio {ratio}, order {order} gives {expect}"
+                );
             }
         }
     }
@@ -384,7 +390,12 @@ mod tests {
                     top_speed = top_speed.max(p.qd()[j].abs());
                 }
             }
-            eprintln!("joint {}: {:.3} deg past its range, top speed before the stop {:.3} of the axis speed", j + 1, worst.to_degrees(), top_speed / p.limits().speed_radps[j]);
+            eprintln!(
+                "joint {}: {:.3} deg past its range, top speed before the stop {:.3} of the axis speed",
+                j + 1,
+                worst.to_degrees(),
+                top_speed / p.limits().speed_radps[j]
+            );
             assert!(worst > 0.0, "joint {} never reached its stop", j + 1);
             assert!(worst < 2f64.to_radians(), "joint {}: {} deg past its range", j + 1, worst.to_degrees());
         }

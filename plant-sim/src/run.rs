@@ -131,7 +131,13 @@ pub struct RecordingAbout<'a> {
 
 /// Start the recorder on `path` (its directory created) with the run's metadata and scene, as
 /// every driver of the plant records.
-pub fn open_recorder(path: &Path, about: &RecordingAbout, scenario: &Scenario, physics: &Physics, live: Option<recordings::LiveConfig>) -> anyhow::Result<Recorder> {
+pub fn open_recorder(
+    path: &Path,
+    about: &RecordingAbout,
+    scenario: &Scenario,
+    physics: &Physics,
+    live: Option<recordings::LiveConfig>,
+) -> anyhow::Result<Recorder> {
     let l = &scenario.loop_;
     let mode = about.mode;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -175,14 +181,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let launcher = crate::launcher::Launcher::now();
     messages::services::validate_rig_name(&opts.rig).map_err(anyhow::Error::msg)?;
     let scenario = Scenario::load(&opts.scenario_path)?;
-    let scenario_text = std::fs::read_to_string(&opts.scenario_path)
-        .with_context(|| format!("reading {}", opts.scenario_path.display()))?;
+    let scenario_text =
+        std::fs::read_to_string(&opts.scenario_path).with_context(|| format!("reading {}", opts.scenario_path.display()))?;
     let mode = opts.mode.unwrap_or(scenario.loop_.mode);
     let l = &scenario.loop_;
-    let duration_s = opts
-        .duration_s
-        .or((l.duration_s > 0.0).then_some(l.duration_s))
-        .unwrap_or_else(|| nominal_duration_s(&scenario));
+    let duration_s = opts.duration_s.or((l.duration_s > 0.0).then_some(l.duration_s)).unwrap_or_else(|| nominal_duration_s(&scenario));
     anyhow::ensure!(duration_s.is_finite() && duration_s > 0.0, "duration {duration_s} s must be positive");
     let period_ns = (l.period_s * 1e9).round() as u64;
     let params = LoopParams {
@@ -283,7 +286,12 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
             let cpus = crate::probe::allowed_cpus();
             let probe_period_ns = opts.host_probe_period_ns.clamp(10_000, period_ns);
             let p = crate::probe::Probe::start(&cpus, probe_period_ns).context("starting the host probe")?;
-            tracing::info!(?cpus, probe_period_us = probe_period_ns / 1000, "host probe running (SCHED_FIFO {} when permitted)", crate::probe::PROBE_PRIORITY);
+            tracing::info!(
+                ?cpus,
+                probe_period_us = probe_period_ns / 1000,
+                "host probe running (SCHED_FIFO {} when permitted)",
+                crate::probe::PROBE_PRIORITY
+            );
             Some(p)
         }
         (true, Mode::Lockstep) => {
@@ -342,10 +350,12 @@ fn scene_config(s: &scenario::Scenario, contact: Option<&crate::contact::StripCo
         StripGeometry {
             top_xyz_m: top.to_vec(),
             nodes_per_layer,
-            substrate_zy_m: (0..=200).map(|i| {
-                let z = params.length_m * i as f64 / 200.0;
-                [z, params.bulge_height_m(z)]
-            }).collect(),
+            substrate_zy_m: (0..=200)
+                .map(|i| {
+                    let z = params.length_m * i as f64 / 200.0;
+                    [z, params.bulge_height_m(z)]
+                })
+                .collect(),
             length_m: params.length_m,
             half_width_m: strip::mesh::HALF_WIDTH_M,
         }

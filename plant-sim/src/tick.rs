@@ -231,7 +231,8 @@ impl PlantTick {
             if !prev_refused {
                 let mut s = StackText::new();
                 let _ = write!(s, "tick {tick}: {r}");
-                let kind = if matches!(r, crate::gate::Refusal::Version(_)) { EventKind::VersionMismatch } else { EventKind::TorqueRefused };
+                let kind =
+                    if matches!(r, crate::gate::Refusal::Version(_)) { EventKind::VersionMismatch } else { EventKind::TorqueRefused };
                 if may_log {
                     tracing::warn!("{}", s.as_str());
                 }
@@ -251,7 +252,11 @@ impl PlantTick {
             if e.controller_fault {
                 let _ = write!(s, "tick {tick}: safe stop requested by the controller (fault)");
             } else {
-                let _ = write!(s, "tick {tick}: safe stop after {} consecutive misses (gravity compensation + joint damping)", self.gate.consecutive_misses());
+                let _ = write!(
+                    s,
+                    "tick {tick}: safe stop after {} consecutive misses (gravity compensation + joint damping)",
+                    self.gate.consecutive_misses()
+                );
             }
             tracing::error!("{}", s.as_str());
             event(recorder.as_deref_mut(), tick, t, EventKind::SafeStop, s.as_str());
@@ -296,7 +301,8 @@ impl PlantTick {
         if let (Some(j), None) = (stop, self.in_end_stop) {
             let [lo, hi] = self.physics.limits().range_rad[j];
             let mut s = StackText::new();
-            let _ = write!(s, "tick {tick}: joint {} in its end stop at {:.4} rad (range {lo:.4} .. {hi:.4} rad)", j + 1, self.physics.q()[j]);
+            let _ =
+                write!(s, "tick {tick}: joint {} in its end stop at {:.4} rad (range {lo:.4} .. {hi:.4} rad)", j + 1, self.physics.q()[j]);
             tracing::warn!("{}", s.as_str());
             event(recorder, tick, t, EventKind::EndStop, s.as_str());
         }
@@ -306,7 +312,13 @@ impl PlantTick {
 
 /// The record of one tick as every driver hands it to the recorder; `timing` is the driver's
 /// (zero in-process: no transport to time).
-pub fn tick_record(state: JointState, wrench: Wrench, o: &TickOutcome, diag: Option<ControllerDiagnostics>, timing: TimingRecord) -> TickRecord {
+pub fn tick_record(
+    state: JointState,
+    wrench: Wrench,
+    o: &TickOutcome,
+    diag: Option<ControllerDiagnostics>,
+    timing: TimingRecord,
+) -> TickRecord {
     TickRecord {
         state,
         wrench,

@@ -111,8 +111,11 @@ fn main() -> anyhow::Result<()> {
     let (tf, scene) = (tf.expect("no /tf at that tick"), scene.expect("no /strip_scene at that tick"));
 
     // World (base) pose of every frame from the recorded edges.
-    let edges: HashMap<String, (String, Isometry3<f64>)> =
-        tf.transforms.iter().map(|t| (t.child_frame_id.clone(), (t.parent_frame_id.clone(), iso_of(&t.translation, &t.rotation)))).collect();
+    let edges: HashMap<String, (String, Isometry3<f64>)> = tf
+        .transforms
+        .iter()
+        .map(|t| (t.child_frame_id.clone(), (t.parent_frame_id.clone(), iso_of(&t.translation, &t.rotation))))
+        .collect();
     fn world(f: &str, e: &HashMap<String, (String, Isometry3<f64>)>) -> Isometry3<f64> {
         e.get(f).map_or(Isometry3::identity(), |(p, t)| world(p, e) * t)
     }
@@ -132,14 +135,8 @@ fn main() -> anyhow::Result<()> {
     let flange = world("flange", &edges);
     let tcp = world("tcp", &edges);
     robot_shapes.push(Shape::Seg(flange.translation.vector, tcp.translation.vector, grey, 4));
-    robot_shapes.push(Shape::Tri(
-        [P3::new(-0.2, -0.2, 0.0), P3::new(0.2, -0.2, 0.0), P3::new(0.2, 0.2, 0.0)],
-        RGBColor(150, 150, 150),
-    ));
-    robot_shapes.push(Shape::Tri(
-        [P3::new(-0.2, -0.2, 0.0), P3::new(0.2, 0.2, 0.0), P3::new(-0.2, 0.2, 0.0)],
-        RGBColor(150, 150, 150),
-    ));
+    robot_shapes.push(Shape::Tri([P3::new(-0.2, -0.2, 0.0), P3::new(0.2, -0.2, 0.0), P3::new(0.2, 0.2, 0.0)], RGBColor(150, 150, 150)));
+    robot_shapes.push(Shape::Tri([P3::new(-0.2, -0.2, 0.0), P3::new(0.2, 0.2, 0.0), P3::new(-0.2, 0.2, 0.0)], RGBColor(150, 150, 150)));
 
     // The strip scene in the task frame, and in the base frame for the overview.
     let task = world("task", &edges);
@@ -205,10 +202,12 @@ fn main() -> anyhow::Result<()> {
     let axis = tcp_task.rotation * P3::y();
     let (u, v) = (axis.cross(&P3::x()).normalize(), axis.cross(&axis.cross(&P3::x())).normalize());
     let radius = 0.010;
-    let ring: Vec<P3> = (0..=48).map(|k| {
-        let t = k as f64 / 48.0 * std::f64::consts::TAU;
-        tcp_task.translation.vector + (u * t.cos() + v * t.sin()) * radius
-    }).collect();
+    let ring: Vec<P3> = (0..=48)
+        .map(|k| {
+            let t = k as f64 / 48.0 * std::f64::consts::TAU;
+            tcp_task.translation.vector + (u * t.cos() + v * t.sin()) * radius
+        })
+        .collect();
     for w in ring.windows(2) {
         shapes.push(Shape::Seg(w[0], w[1], BLACK, 3));
     }
@@ -218,8 +217,16 @@ fn main() -> anyhow::Result<()> {
         shapes.push(Shape::Seg(a, b, RGBColor(217, 26, 26), 4));
     }
     draw(&right, &close, shapes);
-    right.draw(&Text::new(format!("strip at tick {want_tick}: top surface coloured by centre-line bottom pressure"), (20, 20), font.clone()))?;
-    right.draw(&Text::new("blue < 100 kPa (not bonded) | yellow 100 kPa -> red 200 kPa; red arrow: contact force", (20, 50), ("sans-serif", 18).into_font()))?;
+    right.draw(&Text::new(
+        format!("strip at tick {want_tick}: top surface coloured by centre-line bottom pressure"),
+        (20, 20),
+        font.clone(),
+    ))?;
+    right.draw(&Text::new(
+        "blue < 100 kPa (not bonded) | yellow 100 kPa -> red 200 kPa; red arrow: contact force",
+        (20, 50),
+        ("sans-serif", 18).into_font(),
+    ))?;
     // The scene's colour scale (its cells, 0..200 kPa in order) as a legend bar, the bond line marked.
     let (x0, y0, w) = (120, 720, 560);
     let n = scale_cells.len().max(1) as i32;
@@ -234,6 +241,9 @@ fn main() -> anyhow::Result<()> {
     let sub = close.px(substrate.first().unwrap_or(&P3::zeros()));
     right.draw(&Text::new("substrate with its bulge", (sub.0 - 60, sub.1 - 28), ("sans-serif", 16).into_font()))?;
     root.present()?;
-    println!("{output}: tick {want_tick}, {} strip triangles", scene.entities.iter().map(|e| e.triangles.iter().map(|t| t.indices.len() / 3).sum::<usize>()).sum::<usize>());
+    println!(
+        "{output}: tick {want_tick}, {} strip triangles",
+        scene.entities.iter().map(|e| e.triangles.iter().map(|t| t.indices.len() / 3).sum::<usize>()).sum::<usize>()
+    );
     Ok(())
 }

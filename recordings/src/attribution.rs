@@ -270,7 +270,12 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
             }
             // The probe's latest wake-up within a tick either side: it reports a stall when it
             // runs again, which may be before or after the plant's next tick.
-            let probe_near = rows[i.saturating_sub(1)..rows.len().min(i + 2)].iter().filter_map(|n| n.timing.stages).map(|n| n.probe_late_ns).max().unwrap_or(0);
+            let probe_near = rows[i.saturating_sub(1)..rows.len().min(i + 2)]
+                .iter()
+                .filter_map(|n| n.timing.stages)
+                .map(|n| n.probe_late_ns)
+                .max()
+                .unwrap_or(0);
             if s.skipped_periods > 0 {
                 let lost_host = probe_near >= HOST_STALL_NS;
                 for k in 1..=s.skipped_periods as usize {
@@ -316,7 +321,15 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
                 worst = (n, s);
             }
         }
-        let start_tick = rows.iter().find(|r| r.timing.stages.map_or(r.tick - rows[0].tick, |s| (s.deadline_since_start_ns.saturating_sub(d_first) + period_ns / 2) / period_ns) >= worst.1 as u64).map_or(rows[0].tick, |r| r.tick);
+        let start_tick = rows
+            .iter()
+            .find(|r| {
+                r.timing
+                    .stages
+                    .map_or(r.tick - rows[0].tick, |s| (s.deadline_since_start_ns.saturating_sub(d_first) + period_ns / 2) / period_ns)
+                    >= worst.1 as u64
+            })
+            .map_or(rows[0].tick, |r| r.tick);
         a.worst_window = Some((worst.0 as f64 / WINDOW_PERIODS as f64, start_tick));
     }
     // Host bursts: runs of host-lost periods (gaps of up to 2 periods joined), 10 or more long.
@@ -332,7 +345,14 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
             end += 1;
         }
         if n >= 10 {
-            let tick = rows.iter().find(|r| r.timing.stages.is_some_and(|s| (s.deadline_since_start_ns.saturating_sub(d_first) + period_ns / 2) / period_ns >= start as u64)).map_or(0, |r| r.tick);
+            let tick = rows
+                .iter()
+                .find(|r| {
+                    r.timing
+                        .stages
+                        .is_some_and(|s| (s.deadline_since_start_ns.saturating_sub(d_first) + period_ns / 2) / period_ns >= start as u64)
+                })
+                .map_or(0, |r| r.tick);
             a.bursts.push(Burst { tick, periods: n, at_ms: (d_first + start as u64 * period_ns) as f64 * 1e-6 });
         }
         i = end;
@@ -354,10 +374,7 @@ pub fn format_table(a: &Attribution) -> String {
     if a.periods == 0 {
         return s;
     }
-    s += &format!(
-        "control success rate {:.5} ({} of {} periods answered in budget)",
-        a.success_rate, a.answered_in_budget, a.periods
-    );
+    s += &format!("control success rate {:.5} ({} of {} periods answered in budget)", a.success_rate, a.answered_in_budget, a.periods);
     match a.worst_window {
         Some((w, tick)) => s += &format!(", worst {WINDOW_PERIODS}-period window {w:.2} (from tick {tick})\n"),
         None => s += "\n",
@@ -366,9 +383,7 @@ pub fn format_table(a: &Attribution) -> String {
         s += "misses not attributed: the recording has no stage stamps\n";
         return s;
     }
-    s += &format!(
-        "| cause of a miss | misses | rate |\n| --- | --- | --- |\n"
-    );
+    s += &format!("| cause of a miss | misses | rate |\n| --- | --- | --- |\n");
     let rate = |n: u64| n as f64 / a.periods as f64;
     for c in Cause::ALL {
         let n = a.count(c);

@@ -96,8 +96,8 @@ pub fn open_for(path: &Path, allow_truncated: bool) -> anyhow::Result<Recording>
 pub fn report(args: ReportArgs) -> anyhow::Result<()> {
     let rec = open_for(&args.file, args.allow_truncated)?;
     let out = args.out.clone().unwrap_or_else(|| default_report_dir(&args.file));
-    let (numbers, files) = report::write_report(&rec, &out, &args.instants)
-        .with_context(|| format!("writing the report of {}", args.file.display()))?;
+    let (numbers, files) =
+        report::write_report(&rec, &out, &args.instants).with_context(|| format!("writing the report of {}", args.file.display()))?;
     print!("{}", report::format_text(&numbers));
     println!("report      {} and {}", files.text.display(), files.json.display());
     for f in &files.figures {
@@ -145,9 +145,7 @@ mod tests {
         let Cmd::Replay(a) = Rig::parse_from(["rig", "replay", "run.mcap", "--controller"]).cmd else { panic!() };
         assert_eq!(a.controller, Some(PathBuf::from("auto")), "--controller alone = the default controller");
         assert_eq!(a.speed, None);
-        let Cmd::Replay(a) = Rig::parse_from(["rig", "replay", "run.mcap", "--speed", "4", "--controller", "./mine"]).cmd else {
-            panic!()
-        };
+        let Cmd::Replay(a) = Rig::parse_from(["rig", "replay", "run.mcap", "--speed", "4", "--controller", "./mine"]).cmd else { panic!() };
         assert_eq!((a.speed, a.controller), (Some(4.0), Some(PathBuf::from("./mine"))));
         let Cmd::Report(r) = Rig::parse_from(["rig", "report", "a/run.mcap", "--instants", "0.5,1.25"]).cmd else { panic!() };
         assert_eq!(r.instants, vec![0.5, 1.25]);

@@ -115,7 +115,9 @@ pub fn compare(paths: &[PathBuf], out_dir: &Path, allow_truncated: bool) -> anyh
             label: name.clone(),
             points: roll
                 .iter()
-                .filter_map(|&i| interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m).map(|p| (z_mm(i), p * 1e-3)))
+                .filter_map(|&i| {
+                    interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m).map(|p| (z_mm(i), p * 1e-3))
+                })
                 .collect(),
         });
     }

@@ -125,7 +125,15 @@ impl LiveView {
             Ok(Ok((channels, local_addr))) => {
                 let n = channels.len();
                 tracing::info!("live view: Foxglove WebSocket server on ws://{local_addr} ({})", rate_text(cfg.rate_hz));
-                Ok(Self { tx: Some(tx), channels, period_ns, next_ns: vec![0; n], summary: LiveSummary::default(), local_addr, thread: Some(thread) })
+                Ok(Self {
+                    tx: Some(tx),
+                    channels,
+                    period_ns,
+                    next_ns: vec![0; n],
+                    summary: LiveSummary::default(),
+                    local_addr,
+                    thread: Some(thread),
+                })
             }
             Ok(Err(cause)) => {
                 let _ = thread.join();
@@ -270,10 +278,20 @@ mod tests {
 
     type Client = WebSocket<MaybeTlsStream<TcpStream>>;
 
-    const TICKS: LiveChannel<'static> =
-        LiveChannel { topic: "/ticks", schema_name: "t/msg/Tick", schema_encoding: "ros2msg", schema: b"uint64 tick\n", message_encoding: "cdr" };
-    const EVENTS: LiveChannel<'static> =
-        LiveChannel { topic: "/events", schema_name: "t/msg/Event", schema_encoding: "ros2msg", schema: b"string text\n", message_encoding: "cdr" };
+    const TICKS: LiveChannel<'static> = LiveChannel {
+        topic: "/ticks",
+        schema_name: "t/msg/Tick",
+        schema_encoding: "ros2msg",
+        schema: b"uint64 tick\n",
+        message_encoding: "cdr",
+    };
+    const EVENTS: LiveChannel<'static> = LiveChannel {
+        topic: "/events",
+        schema_name: "t/msg/Event",
+        schema_encoding: "ros2msg",
+        schema: b"string text\n",
+        message_encoding: "cdr",
+    };
 
     fn start(rate_hz: f64, queue_capacity: usize) -> LiveView {
         let cfg = LiveConfig { addr: "127.0.0.1:0".parse().unwrap(), rate_hz, queue_capacity };

@@ -86,11 +86,9 @@ fn err<E: std::fmt::Debug>(e: E) -> String {
 
 fn draw_lines<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, p: &LinePlot) -> Result<(), String> {
     root.fill(&WHITE).map_err(err)?;
-    let series: Vec<Series> =
-        p.series.iter().map(|s| Series { label: s.label.clone(), points: decimate(&s.points, MAX_POINTS) }).collect();
+    let series: Vec<Series> = p.series.iter().map(|s| Series { label: s.label.clone(), points: decimate(&s.points, MAX_POINTS) }).collect();
     let (x0, x1) = range(series.iter().flat_map(|s| s.points.iter().map(|q| q.0)));
-    let (y0, y1) =
-        range(series.iter().flat_map(|s| s.points.iter().map(|q| q.1)).chain(p.hlines.iter().map(|h| h.0)));
+    let (y0, y1) = range(series.iter().flat_map(|s| s.points.iter().map(|q| q.1)).chain(p.hlines.iter().map(|h| h.0)));
     let mut chart = ChartBuilder::on(&root)
         .caption(&p.title, ("sans-serif", 24))
         .margin(15)

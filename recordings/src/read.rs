@@ -7,8 +7,8 @@
 //! run), a complete file damaged in the middle, and a recording the plant ended early on purpose
 //! (disk full, write error). [`Recording::open_complete`] refuses the first two.
 
-pub use crate::schema::{EventRow, StripRow, TimingRow, TorqueRow};
 use crate::schema::{self, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
+pub use crate::schema::{EventRow, StripRow, TimingRow, TorqueRow};
 use crate::EventKind;
 use mcap::records::{op, MessageHeader, Record};
 use messages::{ControllerDiagnostics, JointState, Wrench};
@@ -299,7 +299,9 @@ impl Recording {
             Record::Message { header, data } => match links.channels.get(&header.channel_id) {
                 Some(Some(ch)) => self.push_message(path, *ch, &header, &data)?,
                 Some(None) => {}
-                None => return Ok(Err(format!("message {} is on channel {}, which was never defined", header.sequence, header.channel_id))),
+                None => {
+                    return Ok(Err(format!("message {} is on channel {}, which was never defined", header.sequence, header.channel_id)))
+                }
             },
             Record::Metadata(m) => {
                 self.metadata.insert(m.name, m.metadata);
@@ -351,10 +353,8 @@ impl Recording {
 
     /// Records the recorder dropped: from the final summary, else the last `/timing` row.
     pub fn dropped(&self) -> u64 {
-        let from_summary = ["dropped_ticks", "dropped_events"]
-            .iter()
-            .filter_map(|k| self.summary_metadata(k)?.parse::<u64>().ok())
-            .reduce(|a, b| a + b);
+        let from_summary =
+            ["dropped_ticks", "dropped_events"].iter().filter_map(|k| self.summary_metadata(k)?.parse::<u64>().ok()).reduce(|a, b| a + b);
         from_summary.unwrap_or_else(|| self.timing.last().map_or(0, |t| t.recorder_dropped))
     }
 
@@ -385,11 +385,7 @@ impl Recording {
                 return Err(format!("{topic}: tick {} is followed by tick {} (gap or reorder)", w[0], w[1]));
             }
             if ticks.first() != Some(&first) || ticks.last() != Some(&last) {
-                return Err(format!(
-                    "{topic}: ticks {:?}..={:?}, /joint_state has {first}..={last}",
-                    ticks.first(),
-                    ticks.last()
-                ));
+                return Err(format!("{topic}: ticks {:?}..={:?}, /joint_state has {first}..={last}", ticks.first(), ticks.last()));
             }
         }
         if let Some(w) = self.controller.windows(2).find(|w| w[1].tick <= w[0].tick) {
@@ -490,7 +486,10 @@ fn verified_chunk(body: &[u8]) -> Result<Vec<u8>, String> {
         "zstd" => {
             let mut dec = zstd::stream::read::Decoder::with_buffer(&data[..]).map_err(|e| format!("it does not decompress (zstd: {e})"))?;
             // at most one byte more than the header promises: a damaged stream cannot balloon
-            dec.by_ref().take(size.saturating_add(1)).read_to_end(&mut records).map_err(|e| format!("it does not decompress (zstd: {e})"))?;
+            dec.by_ref()
+                .take(size.saturating_add(1))
+                .read_to_end(&mut records)
+                .map_err(|e| format!("it does not decompress (zstd: {e})"))?;
         }
         "" => records.extend_from_slice(&data),
         other => return Err(format!("it uses compression {other:?}, which this reader does not know")),

@@ -179,9 +179,9 @@ fn scenario_file(rec: &Recording, given: Option<&Path>, tmp_dir: &Path) -> anyho
     if let Some(p) = given {
         return Ok(p.to_path_buf());
     }
-    let text = rec.rig_metadata("scenario_toml").with_context(|| {
-        format!("{} stores no scenario (metadata rig/scenario_toml); pass --scenario FILE", rec.path.display())
-    })?;
+    let text = rec
+        .rig_metadata("scenario_toml")
+        .with_context(|| format!("{} stores no scenario (metadata rig/scenario_toml); pass --scenario FILE", rec.path.display()))?;
     std::fs::create_dir_all(tmp_dir).with_context(|| format!("creating {}", tmp_dir.display()))?;
     let p = tmp_dir.join("scenario.toml");
     std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))?;
@@ -235,9 +235,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
         unsafe {
             std::os::unix::process::CommandExt::pre_exec(&mut cmd, messages::host::die_with_parent());
         }
-        let c = cmd
-            .spawn()
-            .with_context(|| format!("starting the controller {}", exe.display()))?;
+        let c = cmd.spawn().with_context(|| format!("starting the controller {}", exe.display()))?;
         child.0 = Some(c);
         tracing::info!(rig = %rig, controller = %exe.display(), "replay: controller started");
     } else if let Some(s) = args.scenario.as_deref() {

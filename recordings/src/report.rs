@@ -183,9 +183,10 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
     let plant = rec.timing.iter().map(|t| t.timing.plant_compute_ns as f64 * 1e-3).collect();
     // Misses and success rate mean something against a clock: real-time recordings only.
     let attribution = (rec.rig_metadata("mode") == Some("realtime")).then(|| crate::attribution::attribute(&rec.timing));
-    let by_cause = attribution.as_ref().filter(|a| a.stamped).map_or(Vec::new(), |a| {
-        crate::attribution::Cause::ALL.iter().map(|&c| (c.name(), a.count(c))).collect()
-    });
+    let by_cause = attribution
+        .as_ref()
+        .filter(|a| a.stamped)
+        .map_or(Vec::new(), |a| crate::attribution::Cause::ALL.iter().map(|&c| (c.name(), a.count(c))).collect());
     ReportNumbers {
         file: rec.path.display().to_string(),
         integrity: rec.integrity.kind(),
@@ -335,10 +336,9 @@ pub fn format_text(n: &ReportNumbers) -> String {
                 r.rolled_length_m * 1e3
             );
             let _ = match (r.force_error_max_abs_n, r.force_error_rms_n, r.force_error_mean_n) {
-                (Some(m), Some(rms), Some(mean)) => writeln!(
-                    s,
-                    "force err   |bottom| - |ref|: max {m:.3} N, RMS {rms:.3} N, mean {mean:+.3} N (thesis: within 0.45 N)"
-                ),
+                (Some(m), Some(rms), Some(mean)) => {
+                    writeln!(s, "force err   |bottom| - |ref|: max {m:.3} N, RMS {rms:.3} N, mean {mean:+.3} N (thesis: within 0.45 N)")
+                }
                 _ => writeln!(s, "force err   no controller diagnostics (no force reference recorded)"),
             };
             let _ = match (r.bond_pressure_share, r.bond_weakest_pa_at_z_m) {
@@ -459,7 +459,10 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
     if !roll.is_empty() && !z_nodes.is_empty() {
         let points: Vec<(f64, f64)> = roll
             .iter()
-            .filter_map(|&i| interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m).map(|p| (rec.strip[i].wheel_z_m * 1e3, p * 1e-3)))
+            .filter_map(|&i| {
+                interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m)
+                    .map(|p| (rec.strip[i].wheel_z_m * 1e3, p * 1e-3))
+            })
             .collect();
         if !points.is_empty() {
             let plot = LinePlot {

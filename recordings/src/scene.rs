@@ -44,10 +44,7 @@ pub const UNDER_WHEEL_SCHEMA: &str = r#"{"title":"rig.PressureUnderWheel","type"
 /// The `/pressure_under_wheel` message of one tick.
 pub fn under_wheel_json(r: &TickHead, centreline_z_m: &[f32], pressure_pa: &[f32]) -> String {
     let p = interp(centreline_z_m, pressure_pa, r.strip.wheel_z_m);
-    format!(
-        r#"{{"tick":{},"wheel_z_m":{},"pressure_pa":{},"bond_line_pa":{}}}"#,
-        r.state.tick, r.strip.wheel_z_m, p, BOND_PRESSURE_PA
-    )
+    format!(r#"{{"tick":{},"wheel_z_m":{},"pressure_pa":{},"bond_line_pa":{}}}"#, r.state.tick, r.strip.wheel_z_m, p, BOND_PRESSURE_PA)
 }
 
 /// `/robot_description`: the URDF once, as ROS 2 `std_msgs/msg/String` (what Foxglove's URDF
@@ -85,7 +82,10 @@ impl SceneConfig {
     /// base; task x = base y, task y = base z, task z = base x.
     pub fn task_frame(strip_start_x_m: f64, strip_y_m: f64, table_z_m: f64) -> Isometry3<f64> {
         let rot = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0));
-        Isometry3::from_parts(nalgebra::Translation3::new(strip_start_x_m, strip_y_m, table_z_m), UnitQuaternion::from_rotation_matrix(&rot))
+        Isometry3::from_parts(
+            nalgebra::Translation3::new(strip_start_x_m, strip_y_m, table_z_m),
+            UnitQuaternion::from_rotation_matrix(&rot),
+        )
     }
 
     /// Ticks between two scene samples at control period `period_s` (at least 1).
@@ -209,9 +209,22 @@ pub fn frame_transforms(robot: &Robot, cfg: &SceneConfig, q: &[f64; 6], ns: u64)
 /// centre-line bottom pressure at its z, [`pressure_colour`]), the substrate with its bulge,
 /// the colour scale with the 100 kPa bond line, the wheel, and the contact force as an arrow.
 /// `pressure_pa`, `top_uy_m`: the tick's centre-line values at the nodes `centreline_z_m`.
-pub fn scene_update(cfg: &SceneConfig, r: &TickHead, centreline_z_m: &[f32], pressure_pa: &[f32], top_uy_m: &[f32], ns: u64) -> SceneUpdate {
+pub fn scene_update(
+    cfg: &SceneConfig,
+    r: &TickHead,
+    centreline_z_m: &[f32],
+    pressure_pa: &[f32],
+    top_uy_m: &[f32],
+    ns: u64,
+) -> SceneUpdate {
     let ts = Some(timestamp(ns));
-    let entity = |id: &str, frame: &str| SceneEntity { timestamp: ts, frame_id: frame.into(), id: id.into(), frame_locked: true, ..Default::default() };
+    let entity = |id: &str, frame: &str| SceneEntity {
+        timestamp: ts,
+        frame_id: frame.into(),
+        id: id.into(),
+        frame_locked: true,
+        ..Default::default()
+    };
     let mut entities = Vec::new();
     let tool = &cfg.tool;
     // The wheel, in the TCP frame (its axis is the tool y axis).

@@ -662,10 +662,7 @@ pub fn parse_f64_list(json: &str) -> Result<Vec<f64>, String> {
     if inner.trim().is_empty() {
         return Ok(Vec::new());
     }
-    inner
-        .split(',')
-        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("{:?}: {e}", v.trim())))
-        .collect()
+    inner.split(',').map(|v| v.trim().parse::<f64>().map_err(|e| format!("{:?}: {e}", v.trim()))).collect()
 }
 
 #[cfg(test)]
@@ -787,7 +784,10 @@ mod tests {
         let e = EventRecord::new(41, 0.041, EventKind::SafeStop, "20 misses in a row");
         encode_event(&mut buf, &e);
         let d = decode_event(&buf, e.wall_ns).unwrap();
-        assert_eq!((d.tick, d.kind, d.kind_name.as_str(), d.text.as_str()), (41, Some(EventKind::SafeStop), "safe_stop", "20 misses in a row"));
+        assert_eq!(
+            (d.tick, d.kind, d.kind_name.as_str(), d.text.as_str()),
+            (41, Some(EventKind::SafeStop), "safe_stop", "20 misses in a row")
+        );
     }
 
     #[test]
@@ -813,19 +813,57 @@ mod tests {
         assert_eq!(fields(WRENCH.schema_text), ["tick", "force", "torque", "frame"]);
         assert_eq!(
             fields(STRIP.schema_text),
-            ["tick", "wheel_z", "contact_force", "bottom_force", "max_bottom_pressure", "top_displacement", "centreline_pressure", "centreline_z"]
+            [
+                "tick",
+                "wheel_z",
+                "contact_force",
+                "bottom_force",
+                "max_bottom_pressure",
+                "top_displacement",
+                "centreline_pressure",
+                "centreline_z"
+            ]
         );
         assert_eq!(fields(EVENTS.schema_text), ["tick", "sim_time", "kind", "kind_name", "text"]);
         assert_eq!(
             fields(TIMING.schema_text),
             [
-                "tick", "publish_stamp", "publish_wall_ns", "torque_receive_wall_ns", "round_trip_ns", "period_ns", "missed",
-                "plant_compute_ns", "controller_compute_ns", "recorder_dropped", "stamped", "deadline_since_start_ns", "publish_since_start_us",
-                "torque_receive_since_start_us", "skipped_periods", "plant_woke_ns", "state_published_ns", "budget_end_ns",
-                "torque_budget_ns", "torque_received_ns", "plant_done_ns", "answered", "refused", "controller_stamped",
-                "controller_woke_ns", "controller_computed_ns", "torque_published_ns", "late_stamped", "late_tick",
-                "late_controller_woke_ns", "late_controller_computed_ns", "late_torque_published_ns", "probe", "probe_late_ns",
-                "probe_stall_from_ns", "probe_period_ns"
+                "tick",
+                "publish_stamp",
+                "publish_wall_ns",
+                "torque_receive_wall_ns",
+                "round_trip_ns",
+                "period_ns",
+                "missed",
+                "plant_compute_ns",
+                "controller_compute_ns",
+                "recorder_dropped",
+                "stamped",
+                "deadline_since_start_ns",
+                "publish_since_start_us",
+                "torque_receive_since_start_us",
+                "skipped_periods",
+                "plant_woke_ns",
+                "state_published_ns",
+                "budget_end_ns",
+                "torque_budget_ns",
+                "torque_received_ns",
+                "plant_done_ns",
+                "answered",
+                "refused",
+                "controller_stamped",
+                "controller_woke_ns",
+                "controller_computed_ns",
+                "torque_published_ns",
+                "late_stamped",
+                "late_tick",
+                "late_controller_woke_ns",
+                "late_controller_computed_ns",
+                "late_torque_published_ns",
+                "probe",
+                "probe_late_ns",
+                "probe_stall_from_ns",
+                "probe_period_ns"
             ]
         );
         for k in EventKind::ALL {

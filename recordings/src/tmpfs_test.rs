@@ -22,12 +22,8 @@ pub fn run_inner_on_private_tmpfs(dir_env: &str, dir: &Path, size: &str, inner_t
         d = dir.display(),
         me = me.display()
     );
-    let out = Command::new("sh")
-        .arg("-c")
-        .arg(format!("unshare --mount {user_ns} sh -c \"{script}\""))
-        .env(dir_env, dir)
-        .output()
-        .expect("sh");
+    let out =
+        Command::new("sh").arg("-c").arg(format!("unshare --mount {user_ns} sh -c \"{script}\"")).env(dir_env, dir).output().expect("sh");
     let _ = std::fs::remove_dir_all(dir);
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -21,11 +21,11 @@
 use crate::live::{LiveChannel, LiveConfig, LiveError, LiveSummary, LiveView};
 use crate::schema::{self, TickHead, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::{sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, MAX_CENTRELINE, RECORDING_FORMAT_VERSION};
-use std::mem::MaybeUninit;
 use mcap::records::{op, MessageHeader, Metadata};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
+use std::mem::MaybeUninit;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -749,7 +749,21 @@ impl WriterThread {
     /// Every `scene_every`-th tick: the transforms and the strip scene (decided here, from the
     /// tick records, so the loop does nothing for them).
     fn write_scene(&mut self, r: &TickHead, log_time: u64) -> Result<(), mcap::McapError> {
-        let Self { mcap, buf, bytes_since_flush, live, fox, scene, robot, scene_every, centreline_z, pressure, top_uy, robot_description, .. } = self;
+        let Self {
+            mcap,
+            buf,
+            bytes_since_flush,
+            live,
+            fox,
+            scene,
+            robot,
+            scene_every,
+            centreline_z,
+            pressure,
+            top_uy,
+            robot_description,
+            ..
+        } = self;
         let (Some(cfg), Some(robot)) = (scene.as_ref(), robot.as_ref()) else { return Ok(()) };
         if !r.state.tick.is_multiple_of(*scene_every) {
             return Ok(());
@@ -990,9 +1004,8 @@ impl WriterThread {
         }
         let meta = self.summary_metadata();
         let mut mcap = self.mcap.take().expect("checked");
-        let res = mcap
-            .write_metadata(&Metadata { name: "recording_summary".into(), metadata: meta })
-            .and_then(|_| mcap.finish().map(|_| ()));
+        let res =
+            mcap.write_metadata(&Metadata { name: "recording_summary".into(), metadata: meta }).and_then(|_| mcap.finish().map(|_| ()));
         // The disk failed under the summary: end the file after its last complete chunk.
         let (err, file) = match res {
             Ok(()) => {

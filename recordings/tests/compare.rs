@@ -29,7 +29,10 @@ fn each_column_is_its_own_run_and_the_overlays_are_written() {
     };
     assert!(text.starts_with("| | ours | yours |"), "{text}");
     assert_eq!(row("force err max (N)"), [format!("{:.3}", a.force_error_n), format!("{:.3}", b.force_error_n)]);
-    assert_eq!(row("force err RMS (N)"), [format!("{:.3}", a.force_error_n / 2f64.sqrt()), format!("{:.3}", b.force_error_n / 2f64.sqrt())]);
+    assert_eq!(
+        row("force err RMS (N)"),
+        [format!("{:.3}", a.force_error_n / 2f64.sqrt()), format!("{:.3}", b.force_error_n / 2f64.sqrt())]
+    );
     assert_eq!(row("misses"), ["3", "3"]);
     // coverage (29 - 2)/36 = 75 % for the first, (11 - 2)/36 = 25 % for the second
     let share: Vec<f64> = row("bond ≥ 100 kPa (% of roll)").iter().map(|c| c.parse().unwrap()).collect();

@@ -23,11 +23,7 @@ fn binaries() -> Option<(PathBuf, PathBuf)> {
     if plant.is_file() && hold.is_file() {
         Some((plant, hold))
     } else {
-        println!(
-            "SKIP: {} or {} not built (cargo build --release -p plant-sim -p rig-tests)",
-            plant.display(),
-            hold.display()
-        );
+        println!("SKIP: {} or {} not built (cargo build --release -p plant-sim -p rig-tests)", plant.display(), hold.display());
         None
     }
 }

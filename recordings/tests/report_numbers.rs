@@ -65,7 +65,10 @@ fn report_on_a_known_recording_gives_the_known_numbers() {
     // apart the interpolated Gaussian dips to at most exp(-(0.25/2)^2) of it.
     let [p, z] = r.bond_weakest_pa_at_z_m.unwrap();
     let third = run.peak_pressure_pa / 3.0;
-    assert!(z >= run.coverage_z_m && p <= third * (1.0 + 1e-12) && p >= third * (-(0.25f64 / 2.0).powi(2)).exp() * (1.0 - 1e-12), "{p} Pa at {z} m");
+    assert!(
+        z >= run.coverage_z_m && p <= third * (1.0 + 1e-12) && p >= third * (-(0.25f64 / 2.0).powi(2)).exp() * (1.0 - 1e-12),
+        "{p} Pa at {z} m"
+    );
 
     let text = report::format_text(&n);
     assert!(text.contains("misses      3") && text.contains("safe stops  1") && text.contains("75.0 %"), "{text}");

@@ -95,18 +95,11 @@ pub fn parse_state(index: usize, state: &Value) -> Result<StateIn, InputError> {
     let name = match obj.get("name") {
         None => return Err(InputError::MissingField { state: label, field: "name" }),
         Some(Value::String(s)) => s.clone(),
-        Some(other) => {
-            return Err(InputError::BadField { state: label, field: "name", expected: "a string", got: other.to_string() })
-        }
+        Some(other) => return Err(InputError::BadField { state: label, field: "name", expected: "a string", got: other.to_string() }),
     };
     let vec = |field: &'static str| -> Result<Vec6, InputError> {
         let value = obj.get(field).ok_or_else(|| InputError::MissingField { state: label.clone(), field })?;
-        let bad = || InputError::BadField {
-            state: label.clone(),
-            field,
-            expected: "an array of 6 finite numbers",
-            got: value.to_string(),
-        };
+        let bad = || InputError::BadField { state: label.clone(), field, expected: "an array of 6 finite numbers", got: value.to_string() };
         let items = value.as_array().filter(|a| a.len() == 6).ok_or_else(bad)?;
         let mut v = Vec6::zeros();
         for (k, item) in items.iter().enumerate() {

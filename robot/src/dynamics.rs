@@ -10,9 +10,7 @@ impl Robot {
     /// Inverse dynamics (7.1) without external wrench: `M qdd + C qd + g + armature qdd +
     /// viscous qd`.
     pub fn rnea(&self, q: &Vec6, qd: &Vec6, qdd: &Vec6) -> Vec6 {
-        self.rnea_local(&sin_cos(q), qd, qdd, Self::GRAVITY_MPS2)
-            + self.armature.component_mul(qdd)
-            + self.viscous.component_mul(qd)
+        self.rnea_local(&sin_cos(q), qd, qdd, Self::GRAVITY_MPS2) + self.armature.component_mul(qdd) + self.viscous.component_mul(qd)
     }
 
     /// Gravity torque `g(q)` of (7.1).

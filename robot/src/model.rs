@@ -17,11 +17,7 @@ pub struct LinkInertia {
 
 impl LinkInertia {
     fn from_row(row: &LinkRow) -> Self {
-        LinkInertia {
-            mass_kg: row.mass_kg,
-            com_m: Vector3::from(row.com_m),
-            inertia_com: Matrix3::from_fn(|r, c| row.inertia_kgm2[r][c]),
-        }
+        LinkInertia { mass_kg: row.mass_kg, com_m: Vector3::from(row.com_m), inertia_com: Matrix3::from_fn(|r, c| row.inertia_kgm2[r][c]) }
     }
 
     /// The rigid union of two bodies given in the same frame (parallel-axis theorem).
@@ -123,11 +119,7 @@ impl Robot {
             let mut body = self.links[i];
             if i == 5 {
                 if let Some(tool) = &self.tool {
-                    body = body.combined(&LinkInertia {
-                        mass_kg: tool.mass_kg,
-                        com_m: tool.com_flange_m,
-                        inertia_com: tool.inertia_com,
-                    });
+                    body = body.combined(&LinkInertia { mass_kg: tool.mass_kg, com_m: tool.com_flange_m, inertia_com: tool.inertia_com });
                 }
             }
             self.bodies[i] = BodyInertia::local(&body);

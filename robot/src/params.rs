@@ -38,11 +38,7 @@ pub const IRB2400_DH: [DhRow; 6] = [
 
 /// Table E.1: link masses, COMs and inertias of the ABB IRB 2400 (from ABB's CAD data).
 pub const IRB2400_LINKS: [LinkRow; 6] = [
-    LinkRow {
-        mass_kg: 150.0,
-        com_m: [-0.070, 0.17, 0.019],
-        inertia_kgm2: [[7.6, 1.0, 0.30], [1.0, 5.8, -0.10], [0.30, -0.10, 5.0]],
-    },
+    LinkRow { mass_kg: 150.0, com_m: [-0.070, 0.17, 0.019], inertia_kgm2: [[7.6, 1.0, 0.30], [1.0, 5.8, -0.10], [0.30, -0.10, 5.0]] },
     LinkRow {
         mass_kg: 47.0,
         com_m: [-0.38, 0.037, -0.0027],
@@ -56,11 +52,7 @@ pub const IRB2400_LINKS: [LinkRow; 6] = [
     LinkRow {
         mass_kg: 18.0,
         com_m: [0.00030, -0.20, 0.0010],
-        inertia_kgm2: [
-            [0.52, -0.00038, -4.3e-5],
-            [-0.00038, 0.044, -0.0036],
-            [-4.3e-5, -0.0036, 0.51],
-        ],
+        inertia_kgm2: [[0.52, -0.00038, -4.3e-5], [-0.00038, 0.044, -0.0036], [-4.3e-5, -0.0036, 0.51]],
     },
     LinkRow {
         mass_kg: 0.97,
@@ -94,8 +86,7 @@ pub const POSITION_LIMIT_RAD: [[f64; 2]; 6] = [
 
 /// Joint speed limits (rad/s), IRB 2400/16 product specification: 150, 150, 150, 360, 360,
 /// 450 deg/s.
-pub const VELOCITY_LIMIT_RADPS: [f64; 6] =
-    [150.0 * DEG, 150.0 * DEG, 150.0 * DEG, 360.0 * DEG, 360.0 * DEG, 450.0 * DEG];
+pub const VELOCITY_LIMIT_RADPS: [f64; 6] = [150.0 * DEG, 150.0 * DEG, 150.0 * DEG, 360.0 * DEG, 360.0 * DEG, 450.0 * DEG];
 
 /// Mechanical end stops (DESIGN section 10): beyond a range limit the stop acts as a stiff spring
 /// `τ = −k δ` on the penetration δ, stiff enough that the joint's own torque limit presses it in by

@@ -13,10 +13,7 @@ use crate::Vec6;
 /// This is the orientation reached from ABB's zero pose by tilting joint 5 forward, with joints
 /// 1, 4, 6 at zero (the non-flipped wrist).
 pub fn scenario_tcp_pose(x_m: f64, y_m: f64, z_m: f64) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        Translation3::new(x_m, y_m, z_m),
-        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-    )
+    Isometry3::from_parts(Translation3::new(x_m, y_m, z_m), UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI))
 }
 
 /// Seed for [`crate::Robot::ik_tcp`] near the scenario pose: elbow up, wrist not flipped,

@@ -79,14 +79,7 @@ impl Sym3 {
 
     #[inline(always)]
     pub fn add(&self, o: &Sym3) -> Sym3 {
-        Sym3 {
-            xx: self.xx + o.xx,
-            yy: self.yy + o.yy,
-            zz: self.zz + o.zz,
-            xy: self.xy + o.xy,
-            xz: self.xz + o.xz,
-            yz: self.yz + o.yz,
-        }
+        Sym3 { xx: self.xx + o.xx, yy: self.yy + o.yy, zz: self.zz + o.zz, xy: self.xy + o.xy, xz: self.xz + o.xz, yz: self.yz + o.yz }
     }
 
     /// `k E + a b^T + b a^T` (symmetric by construction) added to `self`.

@@ -90,15 +90,9 @@ fn missing_field_names_state_and_field() {
 
 #[test]
 fn malformed_field_names_state_field_and_value() {
-    let msg = error_of(
-        "short",
-        json!({"states": [{"name": "short_q", "q": [0.0, 1.0], "qd": Z6, "qdd": Z6, "tau_fd": Z6}]}),
-    );
+    let msg = error_of("short", json!({"states": [{"name": "short_q", "q": [0.0, 1.0], "qd": Z6, "qdd": Z6, "tau_fd": Z6}]}));
     assert!(msg.contains("\"short_q\"") && msg.contains("\"q\"") && msg.contains("[0.0,1.0]"), "{msg}");
-    let msg = error_of(
-        "text",
-        json!({"states": [{"name": "texty", "q": Z6, "qd": [0, 0, "x", 0, 0, 0], "qdd": Z6, "tau_fd": Z6}]}),
-    );
+    let msg = error_of("text", json!({"states": [{"name": "texty", "q": Z6, "qd": [0, 0, "x", 0, 0, 0], "qdd": Z6, "tau_fd": Z6}]}));
     assert!(msg.contains("\"texty\"") && msg.contains("\"qd\""), "{msg}");
     let msg = error_of("noname", json!({"states": [{"q": Z6, "qd": Z6, "qdd": Z6, "tau_fd": Z6}]}));
     assert!(msg.contains("#0") && msg.contains("\"name\""), "{msg}");

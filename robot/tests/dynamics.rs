@@ -101,10 +101,7 @@ fn rnea_equals_mass_matrix_coriolis_gravity() {
         for _ in 0..50 {
             let (q, qd, qdd) = (rng.vec6(3.0), rng.vec6(2.0), rng.vec6(5.0));
             let tau = robot.rnea(&q, &qd, &qdd);
-            let sum = robot.mass_matrix(&q) * qdd
-                + robot.coriolis(&q, &qd)
-                + robot.gravity_torque(&q)
-                + robot.viscous.component_mul(&qd);
+            let sum = robot.mass_matrix(&q) * qdd + robot.coriolis(&q, &qd) + robot.gravity_torque(&q) + robot.viscous.component_mul(&qd);
             assert!(rel_err(&tau, &sum, 1e-9) < 1e-13, "{name}: {tau:?} vs {sum:?}");
         }
     }
@@ -207,11 +204,9 @@ fn rk4_step(robot: &Robot, q: &Vec6, qd: &Vec6, dt: f64) -> (Vec6, Vec6) {
 fn unforced_motion_conserves_energy() {
     // tau = 0 under gravity, no friction: kinetic + potential energy is constant. The arm
     // falls and swings for 0.5 s; RK4 at 0.1 ms.
-    for robot in [
-        Robot::irb2400(),
-        Robot::irb2400_with_tool(Tool::default()).with_armature(Vec6::from_element(0.05)),
-        common::random_arm(7),
-    ] {
+    for robot in
+        [Robot::irb2400(), Robot::irb2400_with_tool(Tool::default()).with_armature(Vec6::from_element(0.05)), common::random_arm(7)]
+    {
         let mut q = Vec6::new(0.3, -1.2, 0.4, 0.5, 0.8, -0.3);
         let mut qd = Vec6::new(0.5, -0.3, 0.4, 1.0, -1.5, 2.0);
         let energy = |q: &Vec6, qd: &Vec6| robot.kinetic_energy(q, qd) + robot.potential_energy(q);

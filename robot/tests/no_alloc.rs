@@ -31,9 +31,7 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn hot_paths_do_not_allocate() {
-    let robot = Robot::irb2400_with_tool(Tool::default())
-        .with_armature(Vec6::from_element(0.01))
-        .with_viscous(Vec6::from_element(1.0));
+    let robot = Robot::irb2400_with_tool(Tool::default()).with_armature(Vec6::from_element(0.01)).with_viscous(Vec6::from_element(1.0));
     let q = Vec6::new(0.1, -1.2, 0.4, 0.2, 0.9, -0.3);
     let qd = Vec6::new(0.5, -0.3, 0.4, 1.0, -1.5, 2.0);
     let target = scenario_tcp_pose(0.9, 0.0, 0.718);

@@ -3,11 +3,7 @@
 use robot::urdf::{chain, chain_from_fk, urdf};
 use robot::{Robot, Tool, Vec6};
 
-const POSES: [[f64; 6]; 3] = [
-    [0.0, -1.3, 0.5, 0.0, 0.8, 0.0],
-    [0.4, -1.0, 0.2, 0.7, -0.6, 1.1],
-    [-1.2, -2.0, -0.5, -2.5, 1.3, -3.0],
-];
+const POSES: [[f64; 6]; 3] = [[0.0, -1.3, 0.5, 0.0, 0.8, 0.0], [0.4, -1.0, 0.2, 0.7, -0.6, 1.1], [-1.2, -2.0, -0.5, -2.5, 1.3, -3.0]];
 
 #[test]
 fn the_urdf_chain_is_the_forward_kinematics_at_three_poses() {

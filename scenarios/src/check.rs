@@ -29,19 +29,12 @@ impl Spans {
     pub(crate) fn place(&self, name: &str) -> Place {
         let element = name.split(' ').next().unwrap_or(name);
         let array = name.split('[').next().unwrap_or(name);
-        [name, element, array]
-            .iter()
-            .find_map(|k| self.at.get(*k))
-            .map_or(Place::Default, |(line, _)| Place::Line(*line))
+        [name, element, array].iter().find_map(|k| self.at.get(*k)).map_or(Place::Default, |(line, _)| Place::Line(*line))
     }
 
     /// The innermost field or element whose value holds byte `pos` (the longest such key).
     pub(crate) fn field_at(&self, pos: usize) -> Option<(&str, usize)> {
-        self.at
-            .iter()
-            .filter(|(_, (_, r))| r.contains(&pos))
-            .max_by_key(|(k, _)| k.len())
-            .map(|(k, (line, _))| (k.as_str(), *line))
+        self.at.iter().filter(|(_, (_, r))| r.contains(&pos)).max_by_key(|(k, _)| k.len()).map(|(k, (line, _))| (k.as_str(), *line))
     }
 }
 
@@ -77,7 +70,9 @@ pub(crate) fn syntax_error(text: &str, path: &Path, e: &toml::de::Error) -> Scen
     let (doc, _) = DeTable::parse_recoverable(text);
     if let Some(key) = key_on_line(text, doc.get_ref(), "", line) {
         message = format!("field {key}: {message}");
-    } else if let Some(at) = e.span().and_then(|sp| text.get(sp)).map(str::trim).filter(|t| !t.is_empty() && t.len() <= 40 && !t.contains('\n')) {
+    } else if let Some(at) =
+        e.span().and_then(|sp| text.get(sp)).map(str::trim).filter(|t| !t.is_empty() && t.len() <= 40 && !t.contains('\n'))
+    {
         // what stands there (the key of "duplicate key"), when it is a short piece of one line
         message += &format!(": `{at}`");
     }
@@ -308,7 +303,11 @@ pub(crate) fn values(s: &Scenario, path: &Path, spans: Option<&Spans>) -> Result
             Kind::Points { z, force } => {
                 let points = v.and_then(|v| v.as_array()).map_or(&[][..], |a| a.as_slice());
                 if points.len() > MAX_FORCE_POINTS {
-                    return Err(bad(f.key.into(), format!("{} points", points.len()), format!("must have at most {MAX_FORCE_POINTS} points")));
+                    return Err(bad(
+                        f.key.into(),
+                        format!("{} points", points.len()),
+                        format!("must have at most {MAX_FORCE_POINTS} points"),
+                    ));
                 }
                 let mut previous_z = f64::NEG_INFINITY;
                 for (i, p) in points.iter().enumerate() {
@@ -316,7 +315,11 @@ pub(crate) fn values(s: &Scenario, path: &Path, spans: Option<&Spans>) -> Result
                     let (z_mm, force_n) = (pair.first().copied().unwrap_or(f64::NAN), pair.get(1).copied().unwrap_or(f64::NAN));
                     in_range(format!("{}[{i}] z_mm", f.key), z_mm, &z, " mm", pass)?;
                     if pass == Pass::Constant && z_mm.partial_cmp(&previous_z) != Some(std::cmp::Ordering::Greater) {
-                        return Err(bad(format!("{}[{i}] z_mm", f.key), fmt_num(z_mm), format!("must be strictly ascending (point {} has z_mm = {})", i - 1, fmt_num(previous_z))));
+                        return Err(bad(
+                            format!("{}[{i}] z_mm", f.key),
+                            fmt_num(z_mm),
+                            format!("must be strictly ascending (point {} has z_mm = {})", i - 1, fmt_num(previous_z)),
+                        ));
                     }
                     previous_z = z_mm;
                     in_range(format!("{}[{i}] force_n", f.key), force_n, &force, " N", pass)?;

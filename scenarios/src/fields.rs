@@ -22,7 +22,10 @@ pub enum Kind {
     /// An array of exactly this many numbers, each within the field's range.
     Floats(usize),
     /// `[[z_mm, force_n], ...]`: at most `MAX_FORCE_POINTS` points, z strictly ascending.
-    Points { z: Range, force: Range },
+    Points {
+        z: Range,
+        force: Range,
+    },
 }
 
 /// One end of a valid range, in the field's unit.
@@ -430,11 +433,9 @@ impl Field {
             Kind::Floats(_) => format!("each in {}", self.range.text()),
             Kind::Bool | Kind::Text => "any".into(),
             Kind::Choice(names) => format!("one of {}", names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")),
-            Kind::Points { z, force } => format!(
-                "at most {MAX_FORCE_POINTS} points; z_mm in {}, strictly ascending; force_n in {}",
-                z.text(),
-                force.text()
-            ),
+            Kind::Points { z, force } => {
+                format!("at most {MAX_FORCE_POINTS} points; z_mm in {}, strictly ascending; force_n in {}", z.text(), force.text())
+            }
         };
         match self.rule {
             Some(r) => format!("{base}; {}", r.text),

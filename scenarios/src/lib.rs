@@ -557,8 +557,7 @@ impl Scenario {
 
     /// Load and validate a scenario file.
     pub fn load(path: &Path) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ScenarioError::Read { path: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read { path: path.to_path_buf(), source })?;
         Self::from_toml_str(&text, path)
     }
 
@@ -660,11 +659,15 @@ mod tests {
             ("[[2, 10]]", "force_ref_along_z[0] force_n", "10"),
             ("[[2, nan]]", "force_ref_along_z[0] force_n", "NaN"),
         ] {
-            let e = Scenario::from_toml_str(&format!("[trajectory]\nforce_ref_along_z = {text}\n"), Path::new("t.toml")).unwrap_err().to_string();
+            let e = Scenario::from_toml_str(&format!("[trajectory]\nforce_ref_along_z = {text}\n"), Path::new("t.toml"))
+                .unwrap_err()
+                .to_string();
             assert!(e.contains(field) && e.contains(&format!("= {value}:")), "{text}: {e}");
         }
         let many: Vec<String> = (0..=MAX_FORCE_POINTS).map(|i| format!("[{i}, -10]")).collect();
-        let e = Scenario::from_toml_str(&format!("[trajectory]\nforce_ref_along_z = [{}]\n", many.join(", ")), Path::new("t.toml")).unwrap_err().to_string();
+        let e = Scenario::from_toml_str(&format!("[trajectory]\nforce_ref_along_z = [{}]\n", many.join(", ")), Path::new("t.toml"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("must have at most 32 points"), "{e}");
     }
 }

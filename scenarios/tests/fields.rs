@@ -187,7 +187,11 @@ fn every_field_refuses_bad_values_naming_file_line_and_field() {
             let msg = e.to_string();
             let line = line + offset;
             assert!(msg.starts_with(&format!("scenario file {FILE}, line {line}")), "{} = {value}: wrong file or line: {msg}", f.key);
-            assert!(msg.contains(&format!("field {named}: ")) || msg.contains(&format!("field {named} = ")), "{} = {value}: field {named} not named: {msg}", f.key);
+            assert!(
+                msg.contains(&format!("field {named}: ")) || msg.contains(&format!("field {named} = ")),
+                "{} = {value}: field {named} not named: {msg}",
+                f.key
+            );
             assert_eq!(e.field(), Some(named.as_str()), "{msg}");
             assert_eq!(e.place(), Some(Place::Line(line)), "{msg}");
             assert!(msg.contains(": must "), "{} = {value}: no reason given: {msg}", f.key);
@@ -277,7 +281,10 @@ fn rules_across_fields_are_checked_and_named() {
 #[test]
 fn unknown_sections_and_fields_say_what_there_is() {
     let e = load("[loop]\nperiod_s = 0.001\nbudget_typo = 3\n").unwrap_err().to_string();
-    assert!(e.starts_with("scenario file walk/bad.toml, line 3: unknown field loop.budget_typo; [loop] has mode, period_s, torque_budget_us"), "{e}");
+    assert!(
+        e.starts_with("scenario file walk/bad.toml, line 3: unknown field loop.budget_typo; [loop] has mode, period_s, torque_budget_us"),
+        "{e}"
+    );
     let e = load("description = \"x\"\n[loops]\nperiod_s = 1\n").unwrap_err().to_string();
     assert!(e.starts_with("scenario file walk/bad.toml, line 2: unknown section loops; the sections are [loop],"), "{e}");
     let e = load("loop = 3\n").unwrap_err().to_string();

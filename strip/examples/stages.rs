@@ -15,7 +15,9 @@ fn main() {
         let m = StripModel::build(&p).unwrap();
         let tot = t.elapsed().as_secs_f64();
         for (k, v) in m.info.timings_s.iter().cloned().chain([("total".to_string(), tot)]) {
-            if !best.contains_key(&k) { order.push(k.clone()); }
+            if !best.contains_key(&k) {
+                order.push(k.clone());
+            }
             best.entry(k).or_default().push(v);
         }
     }

@@ -260,7 +260,17 @@ fn hankel_leading(lc: &Mat<f64>, q: &Mat<f64>, r: usize) -> Result<(Vec<f64>, Ma
     let mut q_lc = Mat::<f64>::zeros(n, n);
     tri_matmul(q_lc.as_mut(), Bs::Rectangular, Accum::Replace, q.as_ref(), Bs::Rectangular, lc.as_ref(), Bs::TriangularLower, 1.0, par);
     let mut ztz = Mat::<f64>::zeros(n, n); // lower half of L_c^T Q L_c
-    tri_matmul(ztz.as_mut(), Bs::TriangularLower, Accum::Replace, lc.transpose(), Bs::TriangularUpper, q_lc.as_ref(), Bs::Rectangular, 1.0, par);
+    tri_matmul(
+        ztz.as_mut(),
+        Bs::TriangularLower,
+        Accum::Replace,
+        lc.transpose(),
+        Bs::TriangularUpper,
+        q_lc.as_ref(),
+        Bs::Rectangular,
+        1.0,
+        par,
+    );
     drop(q_lc);
     if let Ok(evd) = ztz.self_adjoint_eigen(Side::Lower) {
         let ev = evd.S().column_vector();

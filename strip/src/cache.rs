@@ -163,8 +163,8 @@ pub fn load(path: &Path, expect: &StripParams) -> Result<Option<StripModel>> {
         return Err(bad("not a strip model cache file"));
     }
     let hl = u64::from_le_bytes(bytes[8..16].try_into().unwrap()) as usize;
-    let h: Header = serde_json::from_slice(bytes.get(16..16 + hl).ok_or_else(|| bad("truncated header"))?)
-        .map_err(|e| bad(&format!("header: {e}")))?;
+    let h: Header =
+        serde_json::from_slice(bytes.get(16..16 + hl).ok_or_else(|| bad("truncated header"))?).map_err(|e| bad(&format!("header: {e}")))?;
     let expect_json = serde_json::to_string(expect).expect("params serialise");
     if h.params_json != expect_json || h.info.code_version != crate::CODE_VERSION {
         return Err(bad("parameters or code version differ from the request (hash collision or stale file)"));

@@ -147,8 +147,7 @@ impl CraigBampton {
         let mut psi = k_ib.to_dense();
         let mut x = Mat::<f64>::zeros(ni, nb); // M_ii Psi
         let modes = {
-            let work: Vec<_> =
-                column_chunks(psi.as_mut(), PSI_CHUNK).into_iter().zip(column_chunks(x.as_mut(), PSI_CHUNK)).collect();
+            let work: Vec<_> = column_chunks(psi.as_mut(), PSI_CHUNK).into_iter().zip(column_chunks(x.as_mut(), PSI_CHUNK)).collect();
             let work = std::sync::Mutex::new(work);
             let solve_chunks = || loop {
                 let next = work.lock().expect("chunk queue poisoned").pop();

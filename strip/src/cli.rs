@@ -62,20 +62,48 @@ impl ModelArgs {
             None => StripParams::default(),
         };
         let mm = 1e-3;
-        if let Some(v) = self.length_mm { p.length_m = v * mm; }
-        if let Some(v) = self.element_mm { p.element_m = v * mm; }
-        if let Some(v) = self.nu { p.poisson = v; }
-        if let Some(v) = self.youngs_mpa { p.youngs_pa = v * 1e6; }
-        if let Some(v) = self.density { p.density_kg_m3 = v; }
-        if let Some(v) = self.order { p.order = v; }
-        if let Some(v) = self.substrate { p.substrate = v; }
-        if let Some(v) = self.cb_boundary { p.cb_boundary = v; }
-        if let Some(v) = self.cutoff_hz { p.cb_cutoff_hz = v; }
-        if let Some(v) = self.alpha { p.damping_alpha_per_s = v; }
-        if let Some(v) = self.beta { p.damping_beta_s = v; }
-        if let Some(v) = self.bulge_amplitude_mm { p.bulge_amplitude_m = v * mm; }
-        if let Some(v) = self.bulge_width_mm { p.bulge_width_m = v * mm; }
-        if let Some(v) = self.bulge_center_mm { p.bulge_center_m = v * mm; }
+        if let Some(v) = self.length_mm {
+            p.length_m = v * mm;
+        }
+        if let Some(v) = self.element_mm {
+            p.element_m = v * mm;
+        }
+        if let Some(v) = self.nu {
+            p.poisson = v;
+        }
+        if let Some(v) = self.youngs_mpa {
+            p.youngs_pa = v * 1e6;
+        }
+        if let Some(v) = self.density {
+            p.density_kg_m3 = v;
+        }
+        if let Some(v) = self.order {
+            p.order = v;
+        }
+        if let Some(v) = self.substrate {
+            p.substrate = v;
+        }
+        if let Some(v) = self.cb_boundary {
+            p.cb_boundary = v;
+        }
+        if let Some(v) = self.cutoff_hz {
+            p.cb_cutoff_hz = v;
+        }
+        if let Some(v) = self.alpha {
+            p.damping_alpha_per_s = v;
+        }
+        if let Some(v) = self.beta {
+            p.damping_beta_s = v;
+        }
+        if let Some(v) = self.bulge_amplitude_mm {
+            p.bulge_amplitude_m = v * mm;
+        }
+        if let Some(v) = self.bulge_width_mm {
+            p.bulge_width_m = v * mm;
+        }
+        if let Some(v) = self.bulge_center_mm {
+            p.bulge_center_m = v * mm;
+        }
         p.validate()?;
         Ok(p)
     }
@@ -221,7 +249,12 @@ fn bond(p: &StripParams, force_n: f64, roll_mm: [f64; 3], judged_mm: [f64; 2]) -
     let (wb, wf) = (weakest(&bonded), weakest(&front));
     println!("judged z = {:.1}..{:.1} mm, bond needs {:.0} kPa:", judged_mm[0], judged_mm[1], BOND_PRESSURE_PA * 1e-3);
     println!("  bonded everywhere: weakest {:.1} kPa at z = {:.1} mm, {:.1} % of the nodes bond", wb.1 * 1e-3, wb.0 * 1e3, share(&bonded));
-    println!("  laying process:    weakest {:.1} kPa at z = {:.1} mm, {:.1} % of the nodes bond ({lifted} nodes lifted at most)", wf.1 * 1e-3, wf.0 * 1e3, share(&front));
+    println!(
+        "  laying process:    weakest {:.1} kPa at z = {:.1} mm, {:.1} % of the nodes bond ({lifted} nodes lifted at most)",
+        wf.1 * 1e-3,
+        wf.0 * 1e3,
+        share(&front)
+    );
     println!("  bonded everywhere needs a constant {:.2} N (set by z = {:.1} mm)", most.1, most.0 * 1e3);
     Ok(())
 }

@@ -48,9 +48,8 @@ fn m_orthonormalise(w: &mut Mat<f64>, m: &Csc) -> Result<(Mat<f64>, Mat<f64>)> {
     for _ in 0..2 {
         let g = mul_seq(w.transpose(), mw.as_ref());
         let g = Mat::from_fn(p, p, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
-        let llt = g
-            .llt(Side::Lower)
-            .map_err(|_| numeric("lanczos", "Krylov block lost rank (invariant subspace reached before convergence)"))?;
+        let llt =
+            g.llt(Side::Lower).map_err(|_| numeric("lanczos", "Krylov block lost rank (invariant subspace reached before convergence)"))?;
         let l = llt.L();
         let mut l_inv_t = Mat::<f64>::identity(p, p); // L^-T = (L^-1 I)^T
         l.solve_lower_triangular_in_place(l_inv_t.as_mut());
@@ -182,9 +181,7 @@ pub fn lowest_modes_block(k_fact: &Cholesky, m: &Csc, want: Want, p: usize) -> R
                 // all Ritz values below the bound converged, and one beyond it settled well
                 // enough (TOL_COUNT) to close the count; that one is not kept
                 let below: Vec<usize> = idx.iter().copied().filter(|&x| s[x] > 0.0 && 1.0 / s[x] <= lmax).collect();
-                let beyond = idx
-                    .iter()
-                    .any(|&x| s[x] > 0.0 && 1.0 / s[x] > lmax && residual(x) <= TOL_COUNT * s[x]);
+                let beyond = idx.iter().any(|&x| s[x] > 0.0 && 1.0 / s[x] > lmax && residual(x) <= TOL_COUNT * s[x]);
                 (beyond && below.iter().all(|&x| converged(x)), below)
             }
         };

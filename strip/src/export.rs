@@ -52,7 +52,12 @@ pub fn write_npz(model: &StripModel, path: &Path) -> anyhow::Result<()> {
     put_f64(&mut w, "top_xyz_m", &[m, 3], &model.top_xyz_m.iter().flatten().copied().collect::<Vec<_>>())?;
     put_f64(&mut w, "bottom_xz_m", &[nb, 2], &model.bottom_xz_m.iter().flatten().copied().collect::<Vec<_>>())?;
     put_f64(&mut w, "bottom_area_m2", &[nb], &model.bottom_area_m2)?;
-    put_i64(&mut w, "centre_bottom", &[model.centre_bottom.len() as u64], &model.centre_bottom.iter().map(|&i| i as i64).collect::<Vec<_>>())?;
+    put_i64(
+        &mut w,
+        "centre_bottom",
+        &[model.centre_bottom.len() as u64],
+        &model.centre_bottom.iter().map(|&i| i as i64).collect::<Vec<_>>(),
+    )?;
     let input_map: Vec<i64> = (0..m as i64).flat_map(|j| [j, 1, 1]).collect();
     put_i64(&mut w, "input_map", &[m, 3], &input_map)?;
     let output_map: Vec<i64> = (0..m as i64).flat_map(|j| [0, j, 1]).chain((0..nb as i64).flat_map(|i| [1, i, 1])).collect();

@@ -23,10 +23,8 @@ impl Material {
     }
 }
 
-const XI: [[f64; 3]; 8] = [
-    [-1., -1., -1.], [1., -1., -1.], [1., 1., -1.], [-1., 1., -1.],
-    [-1., -1., 1.], [1., -1., 1.], [1., 1., 1.], [-1., 1., 1.],
-];
+const XI: [[f64; 3]; 8] =
+    [[-1., -1., -1.], [1., -1., -1.], [1., 1., -1.], [-1., 1., -1.], [-1., -1., 1.], [1., -1., 1.], [1., 1., 1.], [-1., 1., 1.]];
 
 /// Shape functions and their natural derivatives at (r, s, t).
 fn shape(p: [f64; 3]) -> ([f64; 8], [[f64; 3]; 8]) {
@@ -62,8 +60,7 @@ fn gradients(xyz: &[[f64; 3]; 8], p: [f64; 3]) -> ([f64; 8], [[f64; 3]; 8], f64)
             }
         }
     }
-    let det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1])
-        - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
+    let det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1]) - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
         + j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0]);
     let inv = [
         [
@@ -294,12 +291,8 @@ mod tests {
             let (ke, _) = hex8(&x, &mat);
             let (lam, mu) = mat.lame();
             let eps = [1e-3, -2e-3, 0.5e-3, 0.7e-3, -0.3e-3, 0.2e-3]; // engineering shear
-            // linear field u = E x with symmetric E from eps
-            let e = [
-                [eps[0], 0.5 * eps[3], 0.5 * eps[5]],
-                [0.5 * eps[3], eps[1], 0.5 * eps[4]],
-                [0.5 * eps[5], 0.5 * eps[4], eps[2]],
-            ];
+                                                                      // linear field u = E x with symmetric E from eps
+            let e = [[eps[0], 0.5 * eps[3], 0.5 * eps[5]], [0.5 * eps[3], eps[1], 0.5 * eps[4]], [0.5 * eps[5], 0.5 * eps[4], eps[2]]];
             let mut u = [0.0; 24];
             for a in 0..8 {
                 for i in 0..3 {
@@ -324,11 +317,7 @@ mod tests {
             let mut fint = [0.0; 24];
             for &p in &gauss() {
                 let (_, g, det) = gradients(&x, p);
-                let s = [
-                    [sigma[0], sigma[3], sigma[5]],
-                    [sigma[3], sigma[1], sigma[4]],
-                    [sigma[5], sigma[4], sigma[2]],
-                ];
+                let s = [[sigma[0], sigma[3], sigma[5]], [sigma[3], sigma[1], sigma[4]], [sigma[5], sigma[4], sigma[2]]];
                 for a in 0..8 {
                     for i in 0..3 {
                         fint[3 * a + i] += (0..3).map(|j| s[i][j] * g[a][j]).sum::<f64>() * det;

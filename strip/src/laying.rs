@@ -193,13 +193,16 @@ impl LayingModel {
                     g[(r, 0)] - (0..nb).map(|c| self.schur[(r, c)] * u[c]).sum::<f64>()
                 });
                 s_ff.llt(faer::Side::Lower)
-                    .map_err(|e| numeric("laying contact", format!("condensed stiffness not positive definite ({e:?}) at z_a = {z_a_m} m")))?
+                    .map_err(|e| {
+                        numeric("laying contact", format!("condensed stiffness not positive definite ({e:?}) at z_a = {z_a_m} m"))
+                    })?
                     .solve_in_place(rhs.as_mut());
                 free.iter().enumerate().for_each(|(a, &r)| u[r] = rhs[(a, 0)]);
             }
             // reactions on the strip at the bottom y DOFs: r = S u - g
-            let reaction: Vec<f64> =
-                (0..self.bottom_nodes.len()).map(|i| (0..nb).map(|c| self.schur[(3 * i + 1, c)] * u[c]).sum::<f64>() - g[(3 * i + 1, 0)]).collect();
+            let reaction: Vec<f64> = (0..self.bottom_nodes.len())
+                .map(|i| (0..nb).map(|c| self.schur[(3 * i + 1, c)] * u[c]).sum::<f64>() - g[(3 * i + 1, 0)])
+                .collect();
             let mut changed = false;
             for i in 0..self.bottom_nodes.len() {
                 if bonded[i] {
@@ -229,7 +232,14 @@ impl LayingModel {
 /// The bond check for a roll from `z_from_m` to `z_to_m` in steps of `step_m`: for every
 /// centre-line node in that range, the largest pressure it saw during the roll (the plant's bond
 /// check, on the full model). Returns (z, peak Pa) pairs and the largest number of lifted nodes.
-pub fn bond_check(model: &LayingModel, force_y_n: f64, support: BottomSupport, z_from_m: f64, z_to_m: f64, step_m: f64) -> Result<(Vec<(f64, f64)>, usize)> {
+pub fn bond_check(
+    model: &LayingModel,
+    force_y_n: f64,
+    support: BottomSupport,
+    z_from_m: f64,
+    z_to_m: f64,
+    step_m: f64,
+) -> Result<(Vec<(f64, f64)>, usize)> {
     let line = model.centre_line();
     let mut peak: Vec<f64> = vec![f64::NEG_INFINITY; line.len()];
     let mut lifted = 0;
@@ -243,7 +253,14 @@ pub fn bond_check(model: &LayingModel, force_y_n: f64, support: BottomSupport, z
             peak[k] = peak[k].max(sol.pressure_pa[i]);
         }
     }
-    Ok((line.iter().zip(&peak).filter(|(l, p)| p.is_finite() && l.1 >= z_from_m - 1e-9 && l.1 <= z_to_m + 1e-9).map(|(l, p)| (l.1, *p)).collect(), lifted))
+    Ok((
+        line.iter()
+            .zip(&peak)
+            .filter(|(l, p)| p.is_finite() && l.1 >= z_from_m - 1e-9 && l.1 <= z_to_m + 1e-9)
+            .map(|(l, p)| (l.1, *p))
+            .collect(),
+        lifted,
+    ))
 }
 
 /// For the strip bonded everywhere, the smallest constant wheel force (N, pressing magnitude)

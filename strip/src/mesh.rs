@@ -70,10 +70,7 @@ fn coons(
                     let mut p = [0.0; 2];
                     for k in 0..2 {
                         p[k] = (1.0 - v) * b[k] + v * t[k] + (1.0 - u) * l[k] + u * r[k]
-                            - ((1.0 - u) * (1.0 - v) * p00[k]
-                                + u * (1.0 - v) * p10[k]
-                                + (1.0 - u) * v * p01[k]
-                                + u * v * p11[k]);
+                            - ((1.0 - u) * (1.0 - v) * p00[k] + u * (1.0 - v) * p10[k] + (1.0 - u) * v * p01[k] + u * v * p11[k]);
                     }
                     p
                 })
@@ -101,8 +98,7 @@ impl SectionBuilder {
     }
 
     fn add_grid(&mut self, grid: &[Vec<[f64; 2]>]) {
-        let ids: Vec<Vec<usize>> =
-            grid.iter().map(|row| row.iter().map(|&p| self.node(p)).collect()).collect();
+        let ids: Vec<Vec<usize>> = grid.iter().map(|row| row.iter().map(|&p| self.node(p)).collect()).collect();
         for j in 0..ids.len() - 1 {
             for i in 0..ids[j].len() - 1 {
                 let mut q = [ids[j][i], ids[j][i + 1], ids[j + 1][i + 1], ids[j + 1][i]];
@@ -156,14 +152,10 @@ impl Mesh {
         let (cl, cr, ct) = (-CORE_HALF_M, CORE_HALF_M, BASE_HEIGHT_M + CORE_HEIGHT_M);
         let b = BASE_HEIGHT_M;
         // core
-        let core = coons(
-            n_core,
-            n_arc,
-            &|u| lerp([cl, b], [cr, b], u),
-            &|u| lerp([cl, ct], [cr, ct], u),
-            &|v| lerp([cl, b], [cl, ct], v),
-            &|v| lerp([cr, b], [cr, ct], v),
-        );
+        let core =
+            coons(n_core, n_arc, &|u| lerp([cl, b], [cr, b], u), &|u| lerp([cl, ct], [cr, ct], u), &|v| lerp([cl, b], [cl, ct], v), &|v| {
+                lerp([cr, b], [cr, ct], v)
+            });
         sb.add_grid(&core);
         // left patch: arc 180 -> 135 on u = 0, core edge on u = 1
         let left = coons(
@@ -184,14 +176,10 @@ impl Mesh {
             &|v| arc(45.0 * v),
         );
         sb.add_grid(&right);
-        let top = coons(
-            n_core,
-            n_side,
-            &|u| lerp([cl, ct], [cr, ct], u),
-            &|u| arc(135.0 - 90.0 * u),
-            &|v| lerp([cl, ct], arc(135.0), v),
-            &|v| lerp([cr, ct], arc(45.0), v),
-        );
+        let top =
+            coons(n_core, n_side, &|u| lerp([cl, ct], [cr, ct], u), &|u| arc(135.0 - 90.0 * u), &|v| lerp([cl, ct], arc(135.0), v), &|v| {
+                lerp([cr, ct], arc(45.0), v)
+            });
         sb.add_grid(&top);
 
         let nps = sb.xy.len();
@@ -199,15 +187,13 @@ impl Mesh {
         let mut section_top: Vec<usize> = (0..nps)
             .filter(|&i| {
                 let [x, y] = sb.xy[i];
-                y >= BASE_HEIGHT_M - tol
-                    && ((x * x + (y - BASE_HEIGHT_M).powi(2)).sqrt() - BULB_RADIUS_M).abs() < tol
+                y >= BASE_HEIGHT_M - tol && ((x * x + (y - BASE_HEIGHT_M).powi(2)).sqrt() - BULB_RADIUS_M).abs() < tol
             })
             .collect();
         section_top.sort_by(|&a, &b| sb.xy[a][0].total_cmp(&sb.xy[b][0]));
         let mut section_bottom: Vec<usize> = (0..nps).filter(|&i| sb.xy[i][1].abs() < tol).collect();
         section_bottom.sort_by(|&a, &b| sb.xy[a][0].total_cmp(&sb.xy[b][0]));
-        let section_bottom_centre =
-            *section_bottom.iter().find(|&&i| sb.xy[i][0].abs() < tol).expect("x = 0 bottom node");
+        let section_bottom_centre = *section_bottom.iter().find(|&&i| sb.xy[i][0].abs() < tol).expect("x = 0 bottom node");
 
         let n_z = ((length_m / h).round() as usize).max(2);
         let z_layers: Vec<f64> = (0..=n_z).map(|k| length_m * k as f64 / n_z as f64).collect();
@@ -222,10 +208,7 @@ impl Mesh {
         for k in 0..n_z {
             let (lo, hi) = (k * nps, (k + 1) * nps);
             for q in &sb.quads {
-                hexes.push([
-                    lo + q[0], lo + q[1], lo + q[2], lo + q[3],
-                    hi + q[0], hi + q[1], hi + q[2], hi + q[3],
-                ]);
+                hexes.push([lo + q[0], lo + q[1], lo + q[2], lo + q[3], hi + q[0], hi + q[1], hi + q[2], hi + q[3]]);
             }
         }
         Mesh {
@@ -248,16 +231,12 @@ impl Mesh {
 
     /// All top-surface nodes, ordered layer by layer (z), then by x.
     pub fn top_nodes(&self) -> Vec<usize> {
-        (0..self.layers)
-            .flat_map(|k| self.section_top.iter().map(move |&s| k * self.nodes_per_section + s))
-            .collect()
+        (0..self.layers).flat_map(|k| self.section_top.iter().map(move |&s| k * self.nodes_per_section + s)).collect()
     }
 
     /// All bottom nodes, ordered layer by layer (z), then by x.
     pub fn bottom_nodes(&self) -> Vec<usize> {
-        (0..self.layers)
-            .flat_map(|k| self.section_bottom.iter().map(move |&s| k * self.nodes_per_section + s))
-            .collect()
+        (0..self.layers).flat_map(|k| self.section_bottom.iter().map(move |&s| k * self.nodes_per_section + s)).collect()
     }
 
     /// Tributary (consistent, integral of the shape function) area of each bottom node (m^2),
@@ -308,15 +287,19 @@ mod tests {
             // chord segments, which shrink with h^2
             let exact = 8e-3 * 4e-3 + 0.5 * std::f64::consts::PI * 16e-6;
             let n_arc = m.section_top.len() - 1;
-            let chord_loss = 0.5 * 16e-6 * (n_arc as f64) * ((std::f64::consts::PI / n_arc as f64) - (std::f64::consts::PI / n_arc as f64).sin());
+            let chord_loss =
+                0.5 * 16e-6 * (n_arc as f64) * ((std::f64::consts::PI / n_arc as f64) - (std::f64::consts::PI / n_arc as f64).sin());
             assert!(((area + chord_loss) - exact).abs() < 1e-6 * exact, "h {h}: area {area}");
-            assert!(m.section_quads.iter().all(|q| {
-                let a = |k: usize| m.section_xy[q[k]];
-                (0..4).all(|k| {
-                    let (p, c, n) = (a((k + 3) % 4), a(k), a((k + 1) % 4));
-                    (c[0] - p[0]) * (n[1] - c[1]) - (c[1] - p[1]) * (n[0] - c[0]) > 0.0
-                })
-            }), "all quads convex and counter-clockwise");
+            assert!(
+                m.section_quads.iter().all(|q| {
+                    let a = |k: usize| m.section_xy[q[k]];
+                    (0..4).all(|k| {
+                        let (p, c, n) = (a((k + 3) % 4), a(k), a((k + 1) % 4));
+                        (c[0] - p[0]) * (n[1] - c[1]) - (c[1] - p[1]) * (n[0] - c[0]) > 0.0
+                    })
+                }),
+                "all quads convex and counter-clockwise"
+            );
         }
     }
 

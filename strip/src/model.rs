@@ -149,8 +149,7 @@ impl StripModel {
                 }
             }
             let w_bottom = if nbm > 0.0 { (nt / nbm).sqrt() } else { 1.0 };
-            let out_weight: Vec<f64> =
-                (0..cb_modal.h.nrows()).map(|i| if i < n_top { 1.0 } else { w_bottom }).collect();
+            let out_weight: Vec<f64> = (0..cb_modal.h.nrows()).map(|i| if i < n_top { 1.0 } else { w_bottom }).collect();
             let red = balanced_matched_dc(&cb_modal, p.order, &out_weight)?;
             tm.lap("balanced_truncation");
             Ok((cb_modal, red, bulge.join().expect("bulge thread panicked")))
@@ -162,8 +161,7 @@ impl StripModel {
 
         let mesh = &sys.mesh;
         let top_xyz_m = sys.top_nodes.iter().map(|&n| mesh.coords[n]).collect();
-        let bottom_xz_m: Vec<[f64; 2]> =
-            sys.bottom_nodes.iter().map(|&n| [mesh.coords[n][0], mesh.coords[n][2]]).collect();
+        let bottom_xz_m: Vec<[f64; 2]> = sys.bottom_nodes.iter().map(|&n| [mesh.coords[n][0], mesh.coords[n][2]]).collect();
         let centre_bottom = (0..bottom_xz_m.len()).filter(|&i| bottom_xz_m[i][0].abs() < 1e-9).collect();
         let info = BuildInfo {
             dof_free: sys.n_free(),
@@ -287,10 +285,17 @@ pub fn modal_form(a: &Mat<f64>, b: &Mat<f64>, c: &Mat<f64>) -> Result<ModalForm>
     let cv = &cc * v;
     let modes = keep.len();
     let mut out = ModalForm {
-        lam: keep.iter().map(|&(k, _)| {
-            let l = s[k];
-            if l.im.abs() <= 1e-12 * l.norm() { c64::new(l.re, 0.0) } else { l }
-        }).collect(),
+        lam: keep
+            .iter()
+            .map(|&(k, _)| {
+                let l = s[k];
+                if l.im.abs() <= 1e-12 * l.norm() {
+                    c64::new(l.re, 0.0)
+                } else {
+                    l
+                }
+            })
+            .collect(),
         weight: keep.iter().map(|&(_, w)| w).collect(),
         b: vec![c64::new(0.0, 0.0); b.ncols() * modes],
         c: vec![c64::new(0.0, 0.0); c.nrows() * modes],

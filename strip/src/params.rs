@@ -83,9 +83,7 @@ impl Default for StripParams {
 impl StripParams {
     /// Rejects values the pipeline cannot handle, naming the field.
     pub fn validate(&self) -> Result<(), StripError> {
-        let bad = |field: &'static str, value: f64, why: &'static str| {
-            Err(StripError::Param { field, value, why })
-        };
+        let bad = |field: &'static str, value: f64, why: &'static str| Err(StripError::Param { field, value, why });
         if !(self.length_m > 0.0 && self.length_m < 1.0) {
             return bad("length_m", self.length_m, "must be in (0, 1) m");
         }

@@ -155,12 +155,8 @@ pub fn compare(model: &StripModel, art: &Artifacts) -> Result<Report> {
     }
     cb.k.llt(Side::Lower).map_err(|e| numeric("CB statics", format!("{e:?}")))?.solve_in_place(pcb.as_mut());
     let rcb = &cb.c_react * &pcb;
-    let mut cbr = static_result(
-        model,
-        &w,
-        cb.input_coord.iter().map(|&c| pcb[(c, 0)]).collect(),
-        (0..rcb.nrows()).map(|i| rcb[(i, 0)]).collect(),
-    );
+    let mut cbr =
+        static_result(model, &w, cb.input_coord.iter().map(|&c| pcb[(c, 0)]).collect(), (0..rcb.nrows()).map(|i| rcb[(i, 0)]).collect());
     let pv: Vec<f64> = (0..n).map(|i| pcb[(i, 0)]).collect();
     cbr.bottom_sideways_max_m = Some(sideways(&cb.expand(&pv, sys.n_free())));
     // reduced
@@ -201,7 +197,12 @@ impl Report {
         let _ = writeln!(
             s,
             "weatherstrip model: L = {:.1} mm, h = {:.2} mm, nu = {}, {:?} substrate, CB boundary {:?}, cut-off {} Hz",
-            p.length_m * 1e3, p.element_m * 1e3, p.poisson, p.substrate, p.cb_boundary, p.cb_cutoff_hz
+            p.length_m * 1e3,
+            p.element_m * 1e3,
+            p.poisson,
+            p.substrate,
+            p.cb_boundary,
+            p.cb_cutoff_hz
         );
         let _ = writeln!(
             s,
@@ -222,10 +223,8 @@ impl Report {
             "model", "k_s [N/mm]", "top u_y [mm]", "peak p_c [kPa]", "p_c > 100 kPa z [mm]", "sum R [N]", "max |u_x| bot [mm]"
         );
         for (name, r) in [("full", &self.statics.full), ("cb", &self.statics.cb), ("reduced", &self.statics.reduced)] {
-            let over = r
-                .centreline_over_100kpa_z_m
-                .map(|[a, b]| format!("{:.2} .. {:.2}", a * 1e3, b * 1e3))
-                .unwrap_or_else(|| "none".into());
+            let over =
+                r.centreline_over_100kpa_z_m.map(|[a, b]| format!("{:.2} .. {:.2}", a * 1e3, b * 1e3)).unwrap_or_else(|| "none".into());
             let _ = writeln!(
                 s,
                 "{:>8} {:>12.3} {:>14.5} {:>16.2} {:>22} {:>12.5} {:>16}",
@@ -243,7 +242,11 @@ impl Report {
         let _ = writeln!(
             s,
             "\nHankel singular values: first {:.3e}, at order {} {:.3e}, next {:.3e}, last {:.3e}",
-            hs[0], o, hs[o - 1], hs.get(o).copied().unwrap_or(0.0), hs[hs.len() - 1]
+            hs[0],
+            o,
+            hs[o - 1],
+            hs.get(o).copied().unwrap_or(0.0),
+            hs[hs.len() - 1]
         );
         let _ = writeln!(s, "\ntimings [s]");
         for (k, v) in &self.timings_s {

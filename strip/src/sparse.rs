@@ -3,10 +3,10 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::reborrow::Reborrow;
+use faer::reborrow::ReborrowMut;
 use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::reborrow::ReborrowMut;
 use faer::{Conj, MatMut, Par, Side};
 
 use crate::error::{numeric, Result};
@@ -28,10 +28,7 @@ impl Csc {
 
     /// faer view of this matrix.
     pub fn as_faer(&self) -> SparseColMatRef<'_, usize, f64> {
-        SparseColMatRef::new(
-            SymbolicSparseColMatRef::new_checked(self.nrows, self.ncols, &self.col_ptr, None, &self.row_idx),
-            &self.val,
-        )
+        SparseColMatRef::new(SymbolicSparseColMatRef::new_checked(self.nrows, self.ncols, &self.col_ptr, None, &self.row_idx), &self.val)
     }
 
     /// Submatrix: rows through `row_map` (old row -> new row or `usize::MAX` to drop), columns
@@ -211,7 +208,15 @@ impl Cholesky {
         let par = if a.nrows < PARALLEL_FACTOR_MIN_N { Par::Seq } else { faer::get_global_parallelism() };
         let mut mem = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()));
         symbolic
-            .factorize_numeric_llt(&mut values, a.as_faer(), Side::Lower, Default::default(), par, MemStack::new(&mut mem), Default::default())
+            .factorize_numeric_llt(
+                &mut values,
+                a.as_faer(),
+                Side::Lower,
+                Default::default(),
+                par,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
             .map_err(|e| numeric(stage, format!("matrix not positive definite ({e:?})")))?;
         Ok(Cholesky { symbolic, values, n: a.nrows })
     }

@@ -166,7 +166,7 @@ impl StripStepper {
         let s = ((z_a_m - t.z0) / t.dz).clamp(0.0, (t.n - 1) as f64);
         let i = (s.floor() as usize).clamp(1, t.n.saturating_sub(3).max(1));
         let x = s - i as f64; // in [-1, 2] near the ends, [0, 1] inside
-        // cubic Lagrange weights on nodes i-1, i, i+1, i+2
+                              // cubic Lagrange weights on nodes i-1, i, i+1, i+2
         let l = [
             -x * (x - 1.0) * (x - 2.0) / 6.0,
             (x + 1.0) * (x - 1.0) * (x - 2.0) / 2.0,

@@ -81,7 +81,9 @@ fn releasing_the_strip_ahead_of_the_wheel_raises_the_weakest_bond_pressure() {
     // lies on a flank, not on the crest.
     let p = params();
     let laying = LayingModel::build(&p).unwrap();
-    let weakest = |v: &[(f64, f64)]| v.iter().filter(|q| (4e-3..=36e-3).contains(&q.0)).fold((0.0, f64::INFINITY), |w, q| if q.1 < w.1 { *q } else { w });
+    let weakest = |v: &[(f64, f64)]| {
+        v.iter().filter(|q| (4e-3..=36e-3).contains(&q.0)).fold((0.0, f64::INFINITY), |w, q| if q.1 < w.1 { *q } else { w })
+    };
     let (bonded, _) = bond_check(&laying, -10.0, BottomSupport::BondedEverywhere, 2e-3, 38e-3, 2e-3).unwrap();
     let (front, lifted) = bond_check(&laying, -10.0, BottomSupport::BondFront, 2e-3, 38e-3, 2e-3).unwrap();
     let (wb, wf) = (weakest(&bonded), weakest(&front));

@@ -26,7 +26,11 @@ pub fn bin(name: &str) -> PathBuf {
     let started = if name == "rig" { &["rig", "plant-sim", "controller"][..] } else { &[name][..] };
     for b in started {
         if let Some(newer) = source_newer_than_binary(b) {
-            panic!("{} is older than its source {}: run `cargo build --release --workspace --bins` first", bin_dir().join(b).display(), newer.display());
+            panic!(
+                "{} is older than its source {}: run `cargo build --release --workspace --bins` first",
+                bin_dir().join(b).display(),
+                newer.display()
+            );
         }
     }
     p
@@ -241,10 +245,7 @@ static PYTHON_SERIAL: Mutex<()> = Mutex::new(());
 /// naming the `pip install` line: the third-party client is what the test is about, and
 /// `.ci/deps` (part of README's test command) installs it.
 pub fn python_has(test: &str, modules: &str, pip: &str) -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", &format!("import {modules}")])
-        .output()
-        .is_ok_and(|o| o.status.success());
+    let ok = Command::new("python3").args(["-c", &format!("import {modules}")]).output().is_ok_and(|o| o.status.success());
     assert!(ok, "{test}: python3 lacks {modules}: run `bash .ci/deps` (or pip install {pip})");
     ok
 }
@@ -371,8 +372,16 @@ pub fn physics_digest(rec: &recordings::read::Recording) -> String {
     }
     for s in &rec.strip {
         put(s.tick);
-        [s.wheel_z_m, s.contact_force_n, s.bottom_force_n, s.max_bottom_pressure_pa, s.top_displacement_m].iter().for_each(|v| put(v.to_bits()));
+        [s.wheel_z_m, s.contact_force_n, s.bottom_force_n, s.max_bottom_pressure_pa, s.top_displacement_m]
+            .iter()
+            .for_each(|v| put(v.to_bits()));
         s.centreline_pressure_pa.iter().for_each(|v| put(u64::from(v.to_bits())));
     }
-    format!("{h:016x} ({} states, {} wrenches, {} torques, {} strip records)", rec.joint_state.len(), rec.wrench.len(), rec.joint_torque.len(), rec.strip.len())
+    format!(
+        "{h:016x} ({} states, {} wrenches, {} torques, {} strip records)",
+        rec.joint_state.len(),
+        rec.wrench.len(),
+        rec.joint_torque.len(),
+        rec.strip.len()
+    )
 }

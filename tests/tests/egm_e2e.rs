@@ -30,7 +30,11 @@ fn free_port() -> u16 {
 fn wait_bound(port: u16, client: &mut Daemon) {
     let end = Instant::now() + Duration::from_secs(30);
     while UdpSocket::bind(("127.0.0.1", port)).is_ok() {
-        assert!(Instant::now() < end && client.wait_timeout(Duration::from_millis(0)).is_none(), "the EGM client never bound port {port}: {}", client.stderr());
+        assert!(
+            Instant::now() < end && client.wait_timeout(Duration::from_millis(0)).is_none(),
+            "the EGM client never bound port {port}: {}",
+            client.stderr()
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
 }
@@ -49,10 +53,16 @@ fn egm_run(test: &str, tag: &str, mode: &str, duration_s: f64, egm_extra: &str) 
     }
     let mut rig = TestRig::new(tag, "lockstep");
     let port = free_port();
-    rig.scenario = write_scenario(&rig.dir, "lockstep", &format!("[egm]\nenabled = true\nsensor_address = \"127.0.0.1:{port}\"\n{egm_extra}"));
+    rig.scenario =
+        write_scenario(&rig.dir, "lockstep", &format!("[egm]\nenabled = true\nsensor_address = \"127.0.0.1:{port}\"\n{egm_extra}"));
     let client_log = rig.dir.join("client.json");
     let port_s = port.to_string();
-    let mut client = Daemon::start("egm-client", Path::new("python3"), &[client_script().to_str().unwrap(), &port_s, client_log.to_str().unwrap(), mode], &rig.dir);
+    let mut client = Daemon::start(
+        "egm-client",
+        Path::new("python3"),
+        &[client_script().to_str().unwrap(), &port_s, client_log.to_str().unwrap(), mode],
+        &rig.dir,
+    );
     wait_bound(port, &mut client);
     let plant = rig.plant(duration_s);
     Some(EgmRun { rig, plant, client_log, client })
@@ -178,7 +188,12 @@ fn a_repeated_sequence_number_is_refused_with_an_event() {
     assert_eq!(summary["safe_stops"], 0, "{summary}");
     let texts = events_text(&rec, EventKind::EgmRefused);
     // abb-robot-client numbers its messages 1, 3, 5, ...: message 51 carries 101, the repeat 99
-    assert_eq!(texts, vec!["tick 200: EGM sensor message refused: wrong sequence: seqno 99 after 99 (must increase)".to_string()], "{:?}", rec.events);
+    assert_eq!(
+        texts,
+        vec!["tick 200: EGM sensor message refused: wrong sequence: seqno 99 after 99 (must increase)".to_string()],
+        "{:?}",
+        rec.events
+    );
 }
 
 #[test]
@@ -189,7 +204,10 @@ fn an_out_of_range_reference_is_refused_with_an_event_and_the_arm_stays() {
     assert_eq!(summary["refusals"], 1, "{summary}");
     let texts = events_text(&rec, EventKind::EgmRefused);
     assert_eq!(texts.len(), 1, "{:?}", rec.events);
-    assert!(texts[0].starts_with("tick 200: EGM sensor message refused: axis 3 reference 70.000 deg beyond its range -60 .. 65 deg"), "{texts:?}");
+    assert!(
+        texts[0].starts_with("tick 200: EGM sensor message refused: axis 3 reference 70.000 deg beyond its range -60 .. 65 deg"),
+        "{texts:?}"
+    );
     let q0 = rec.joint_state[0].q;
     let drift = rec.joint_state.iter().map(|s| (Vec6::from(s.q) - Vec6::from(q0)).amax()).fold(0.0, f64::max);
     assert!(drift < 1e-6, "the refused reference moved the arm by {drift} rad");
@@ -213,7 +231,12 @@ fn egm_thesis_run(tag: &str) -> (PathBuf, Recording) {
     let mut ctrl = Daemon::start("egm-controller", &bin("egm-controller"), &["--scenario", sc.to_str().unwrap()], &dir);
     wait_bound(port, &mut ctrl);
     let out = dir.join("run.mcap");
-    let mut plant = Daemon::start("plant", &bin("plant-sim"), &["--rig", &rig, "--scenario", sc.to_str().unwrap(), "--mode", "lockstep", "--out", out.to_str().unwrap()], &dir);
+    let mut plant = Daemon::start(
+        "plant",
+        &bin("plant-sim"),
+        &["--rig", &rig, "--scenario", sc.to_str().unwrap(), "--mode", "lockstep", "--out", out.to_str().unwrap()],
+        &dir,
+    );
     // The first run may build and cache the strip model.
     assert!(plant.expect_exit(Duration::from_secs(300)).success(), "plant: {}", plant.stderr());
     assert!(ctrl.expect_exit(Duration::from_secs(10)).success(), "egm-controller: {}", ctrl.stderr());
@@ -267,10 +290,20 @@ fn rig_run_with_controller_none_waits_for_an_external_egm_client() {
     let port = free_port();
     let sc = write_scenario(&t.dir, "lockstep", &format!("[egm]\nenabled = true\nsensor_address = \"127.0.0.1:{port}\"\n"));
     let log = t.dir.join("client.json");
-    let mut client = Daemon::start("egm-client", Path::new("python3"), &[client_script().to_str().unwrap(), &port.to_string(), log.to_str().unwrap(), "step"], &t.dir);
+    let mut client = Daemon::start(
+        "egm-client",
+        Path::new("python3"),
+        &[client_script().to_str().unwrap(), &port.to_string(), log.to_str().unwrap(), "step"],
+        &t.dir,
+    );
     wait_bound(port, &mut client);
     let out = t.dir.join("out");
-    let mut rig = Daemon::start("rig", &bin("rig"), &["run", sc.to_str().unwrap(), "--controller", "none", "--duration", "0.3", "--out", out.to_str().unwrap()], &t.dir);
+    let mut rig = Daemon::start(
+        "rig",
+        &bin("rig"),
+        &["run", sc.to_str().unwrap(), "--controller", "none", "--duration", "0.3", "--out", out.to_str().unwrap()],
+        &t.dir,
+    );
     let st = rig.expect_exit(Duration::from_secs(60));
     assert_eq!(st.code(), Some(0), "rig run: {}\n{}", rig.stdout(), rig.stderr());
     assert!(client.expect_exit(Duration::from_secs(20)).success(), "{}", client.stderr());

@@ -81,7 +81,12 @@ fn default_scenario_with_integral_action_tracks_within_the_issue_bounds() {
     // dynamics, so "within a few percent" (the issue) is in fact well under 1 %.
     let model = strip::StripModel::load_or_build(&plant_sim::contact::strip_params(&s)).unwrap();
     let c = design::stress::compare_at(&rec, &model, 8e-3).unwrap();
-    eprintln!("Figure 7.4 at z = {:.3} mm, {:.3} N: max |recorded - full static| / peak {:.3} %", c.wheel_z_m * 1e3, c.wheel_force_n, 100.0 * c.max_rel_diff);
+    eprintln!(
+        "Figure 7.4 at z = {:.3} mm, {:.3} N: max |recorded - full static| / peak {:.3} %",
+        c.wheel_z_m * 1e3,
+        c.wheel_force_n,
+        100.0 * c.max_rel_diff
+    );
     assert!(c.profile.len() >= 30 && (c.wheel_force_n + 10.0).abs() < 0.1, "{c:?}");
     assert!(c.max_rel_diff < 0.01, "recorded vs full static bottom pressure differ by {:.2} % of the peak", 100.0 * c.max_rel_diff);
 }

@@ -112,7 +112,12 @@ fn recorded_counts(path: &Path) -> std::collections::BTreeMap<String, u64> {
 
 fn advertised(report: &Value) -> BTreeSet<(String, String, String, String)> {
     let s = |c: &Value, k: &str| c[k].as_str().unwrap_or_default().to_string();
-    report["advertised"].as_array().unwrap().iter().map(|c| (s(c, "topic"), s(c, "schemaName"), s(c, "schemaEncoding"), s(c, "encoding"))).collect()
+    report["advertised"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| (s(c, "topic"), s(c, "schemaName"), s(c, "schemaEncoding"), s(c, "encoding")))
+        .collect()
 }
 
 /// The client's decoded joint states are the recorded ones, tick for tick.
@@ -126,9 +131,15 @@ fn assert_samples_recorded(report: &Value, rec: &Recording) {
         assert_eq!(q.len(), 6);
         for (j, (live, recorded)) in q.iter().zip(row.q.iter()).enumerate() {
             // equal up to the last digit serde_json's float parser may round (JSON text, not CDR)
-            assert!((live - recorded).abs() <= 4.0 * f64::EPSILON * recorded.abs().max(1e-300), "tick {tick} q[{j}]: live {live}, recorded {recorded}");
+            assert!(
+                (live - recorded).abs() <= 4.0 * f64::EPSILON * recorded.abs().max(1e-300),
+                "tick {tick} q[{j}]: live {live}, recorded {recorded}"
+            );
         }
-        assert!((s["sim_time"].as_f64().unwrap() - row.sim_time_s).abs() <= 4.0 * f64::EPSILON * row.sim_time_s.abs(), "tick {tick}: sim_time");
+        assert!(
+            (s["sim_time"].as_f64().unwrap() - row.sim_time_s).abs() <= 4.0 * f64::EPSILON * row.sim_time_s.abs(),
+            "tick {tick}: sim_time"
+        );
     }
 }
 
@@ -139,7 +150,11 @@ fn rig_run_live_serves_the_recorded_channels_at_100_hz_to_a_foxglove_client_whil
     let (_, recording, addr, mut rig) = start_live_run("live", 10.0, &[]);
     wait_listening(addr, &mut rig);
     let report = run_client(addr, 1.0);
-    assert!(rig.wait_timeout(Duration::ZERO).is_none(), "the run ended before the client had 1 s of it; raise the duration:\n{}", rig.stdout());
+    assert!(
+        rig.wait_timeout(Duration::ZERO).is_none(),
+        "the run ended before the client had 1 s of it; raise the duration:\n{}",
+        rig.stdout()
+    );
     let status = rig.expect_exit(Duration::from_secs(60));
     assert_eq!(status.code(), Some(0), "rig run:\n{}\n{}", rig.stdout(), rig.stderr());
 
@@ -224,7 +239,18 @@ fn a_taken_live_port_is_refused_before_anything_starts_and_by_the_plant() {
     // the plant itself (a port taken after rig's check): exit 1, one sentence, no recording file
     let mcap = dir.join("plant.mcap");
     let o = Command::new(bin("plant-sim"))
-        .args(["--rig", &rig, "--scenario", scenario.to_str().unwrap(), "--duration", "1", "--out", mcap.to_str().unwrap(), "--live", &addr.to_string()])
+        .args([
+            "--rig",
+            &rig,
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--duration",
+            "1",
+            "--out",
+            mcap.to_str().unwrap(),
+            "--live",
+            &addr.to_string(),
+        ])
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&o.stderr);
@@ -241,7 +267,16 @@ fn live_without_a_recording_is_refused_naming_the_flag() {
     let dir = temp_dir(&rig);
     let scenario = write_scenario(&dir, "realtime", "[recording]\nenabled = false\n");
     let o = Command::new(bin("rig"))
-        .args(["run", scenario.to_str().unwrap(), "--duration", "1", "--out", dir.join("out").to_str().unwrap(), "--live", &format!("127.0.0.1:{}", free_port())])
+        .args([
+            "run",
+            scenario.to_str().unwrap(),
+            "--duration",
+            "1",
+            "--out",
+            dir.join("out").to_str().unwrap(),
+            "--live",
+            &format!("127.0.0.1:{}", free_port()),
+        ])
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&o.stderr);

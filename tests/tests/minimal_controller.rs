@@ -31,7 +31,10 @@ fn the_readme_shows_the_minimal_controller_as_it_is() {
     let start = readme.find("```python\n").expect("a ```python block in messages/README.md") + "```python\n".len();
     let len = readme[start..].find("```\n").expect("the Python block ends");
     assert!(readme[start + len..].find("```python").is_none(), "one Python block only");
-    assert!(readme[start..start + len] == file, "messages/README.md's Python block differs from messages/examples/minimal_controller.py: copy the file into the block");
+    assert!(
+        readme[start..start + len] == file,
+        "messages/README.md's Python block differs from messages/examples/minimal_controller.py: copy the file into the block"
+    );
     assert!(file.starts_with("#!/usr/bin/env python3\n"), "rig run starts a controller file directly: it needs its shebang");
     let mode = std::fs::metadata(script()).unwrap().permissions();
     assert!(std::os::unix::fs::PermissionsExt::mode(&mode) & 0o111 != 0, "the script must be executable");
@@ -104,7 +107,9 @@ fn minimal_controller_answers_every_tick_and_holds_the_arm_then_exits_0_on_the_g
 
 #[test]
 fn minimal_controller_exits_non_zero_soon_after_the_plant_is_killed() {
-    let Some((_g, _t, mut plant, mut py)) = minimal_rig("minimal_controller_exits_when_the_plant_dies", "min-dead", 600.0, "") else { return };
+    let Some((_g, _t, mut plant, mut py)) = minimal_rig("minimal_controller_exits_when_the_plant_dies", "min-dead", 600.0, "") else {
+        return;
+    };
     wait_for_log(&plant, "connected", Duration::from_secs(20));
     std::thread::sleep(Duration::from_millis(200)); // well into the run
     let killed = Instant::now();
@@ -133,7 +138,9 @@ fn minimal_controller_exits_non_zero_soon_after_the_plant_is_killed() {
 fn minimal_controller_waits_for_a_stopped_plant_up_to_the_stall_timeout() {
     let stall_s = 0.3;
     let extra = format!("peer_stall_timeout_s = {stall_s}\n");
-    let Some((_g, _t, plant, mut py)) = minimal_rig("minimal_controller_waits_for_a_stopped_plant", "min-stall", 600.0, &extra) else { return };
+    let Some((_g, _t, plant, mut py)) = minimal_rig("minimal_controller_waits_for_a_stopped_plant", "min-stall", 600.0, &extra) else {
+        return;
+    };
     wait_for_log(&plant, "connected", Duration::from_secs(20));
     std::thread::sleep(Duration::from_millis(100));
     // A plant stopped for less than the stall timeout is alive: the controller keeps going.
@@ -151,6 +158,9 @@ fn minimal_controller_waits_for_a_stopped_plant_up_to_the_stall_timeout() {
     assert!(!st.success(), "a silent plant ends the controller with an error ({st})");
     let err = py.stderr();
     assert!(err.contains("alive but silent for 0.3 s") && err.lines().count() == 1, "one sentence: {err}");
-    assert!(after >= Duration::from_secs_f64(stall_s - 0.01) && after < Duration::from_secs_f64(stall_s + 0.5), "exited {after:?} after the SIGSTOP");
+    assert!(
+        after >= Duration::from_secs_f64(stall_s - 0.01) && after < Duration::from_secs_f64(stall_s + 0.5),
+        "exited {after:?} after the SIGSTOP"
+    );
     println!("minimal controller: exited {after:?} after the plant's SIGSTOP (stall timeout {stall_s} s): {}", err.trim());
 }

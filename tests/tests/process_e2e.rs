@@ -142,7 +142,8 @@ fn kill_launcher(tag: &str, args: &[&str], dir: &Path, daemons: usize, recording
         assert!(t0.elapsed() < Duration::from_secs(30), "{tag}: daemons did not start ({k:?})");
         std::thread::sleep(Duration::from_millis(20));
     };
-    let names: Vec<String> = kids.iter().map(|k| std::fs::read_to_string(format!("/proc/{k}/comm")).unwrap_or_default().trim().to_string()).collect();
+    let names: Vec<String> =
+        kids.iter().map(|k| std::fs::read_to_string(format!("/proc/{k}/comm")).unwrap_or_default().trim().to_string()).collect();
     std::thread::sleep(Duration::from_millis(700));
     let _ = rig.kill();
     let killed = Instant::now();
@@ -194,7 +195,10 @@ fn kill_launcher(tag: &str, args: &[&str], dir: &Path, daemons: usize, recording
             // paced runs are held to the note.)
             let why = rec.events_of(EventKind::Fault).find(|e| e.text.contains("the launcher (PID"));
             assert!(why.is_some() || tag == "rig-sweep", "{tag}: the recording does not say the launcher died: {:?}", rec.events);
-            println!("{tag}: {names:?} gone {took:?} after SIGKILL of the launcher; recording finalised with {} ticks", rec.joint_state.len());
+            println!(
+                "{tag}: {names:?} gone {took:?} after SIGKILL of the launcher; recording finalised with {} ticks",
+                rec.joint_state.len()
+            );
         }
         None => println!("{tag}: {names:?} gone {took:?} after SIGKILL of the launcher"),
     }
@@ -207,7 +211,14 @@ fn sigkill_of_rig_run_ends_both_daemons_within_a_second_and_the_recording_is_fin
     let dir = temp_dir(&rig);
     let scenario = write_scenario(&dir, "realtime", "");
     let out = dir.join("out");
-    kill_launcher("rig-run", &["run", scenario.to_str().unwrap(), "--duration", "300", "--out", out.to_str().unwrap()], &dir, 2, Some(&out.join("run.mcap")), Output::Files);
+    kill_launcher(
+        "rig-run",
+        &["run", scenario.to_str().unwrap(), "--duration", "300", "--out", out.to_str().unwrap()],
+        &dir,
+        2,
+        Some(&out.join("run.mcap")),
+        Output::Files,
+    );
 }
 
 #[test]
@@ -227,7 +238,14 @@ fn sigkill_of_rig_timing_ends_both_daemons_within_a_second() {
     let rig = unique_rig("kill-timing");
     let dir = temp_dir(&rig);
     let out = dir.join("out");
-    kill_launcher("rig-timing", &["timing", "--seconds", "300", "--out", out.to_str().unwrap()], &dir, 2, Some(&out.join("run.mcap")), Output::Files);
+    kill_launcher(
+        "rig-timing",
+        &["timing", "--seconds", "300", "--out", out.to_str().unwrap()],
+        &dir,
+        2,
+        Some(&out.join("run.mcap")),
+        Output::Files,
+    );
 }
 
 #[test]
@@ -239,7 +257,16 @@ fn sigkill_of_rig_sweep_ends_both_daemons_within_a_second() {
     let out = dir.join("out");
     kill_launcher(
         "rig-sweep",
-        &["sweep", scenario.to_str().unwrap(), "--set", "loop.max_consecutive_misses=20,21", "--duration", "3000", "--out", out.to_str().unwrap()],
+        &[
+            "sweep",
+            scenario.to_str().unwrap(),
+            "--set",
+            "loop.max_consecutive_misses=20,21",
+            "--duration",
+            "3000",
+            "--out",
+            out.to_str().unwrap(),
+        ],
         &dir,
         2,
         Some(&out.join("case-00").join("run.mcap")),
@@ -269,7 +296,8 @@ fn a_sigbus_in_the_plant_is_one_sentence_and_exit_71_and_rig_names_the_plant() {
     let dir = temp_dir(&rig);
     let scenario = write_scenario(&dir, "realtime", "");
     let out = dir.join("out");
-    let mut run = Daemon::start("rig", &bin("rig"), &["run", scenario.to_str().unwrap(), "--duration", "30", "--out", out.to_str().unwrap()], &dir);
+    let mut run =
+        Daemon::start("rig", &bin("rig"), &["run", scenario.to_str().unwrap(), "--duration", "30", "--out", out.to_str().unwrap()], &dir);
     let t0 = Instant::now();
     let plant = loop {
         let k = children(run.pid());
@@ -359,7 +387,11 @@ export RIG_ICEORYX2_DIR={state}
     let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap_or_default();
     for (who, file) in [("plant", "plant.err"), ("controller", "ctrl.err")] {
         let text = read(file);
-        assert_eq!(field(&out, who), EXIT_SHARED_MEMORY.to_string(), "{who} exit status (71 = shared memory; 135 would be SIGBUS):\n{text}");
+        assert_eq!(
+            field(&out, who),
+            EXIT_SHARED_MEMORY.to_string(),
+            "{who} exit status (71 = shared memory; 135 would be SIGBUS):\n{text}"
+        );
         let lines: Vec<&str> = text.lines().filter(|l| l.contains(needle)).collect();
         assert_eq!(lines.len(), 1, "{who}: one sentence with {needle:?}:\n{text}");
         assert!(lines[0].contains("--shm-size"), "{who}: the sentence carries the fix: {}", lines[0]);

@@ -66,9 +66,17 @@ fn python_controller_holds_the_arm_in_lockstep_with_gravity_equal_to_the_rust_mo
         let s = r.timing.stages.expect("stage stamps on /timing");
         let c = s.controller.unwrap_or_else(|| panic!("tick {}: no controller stamps", r.tick));
         assert!(
-            s.plant_woke_ns <= c.woke_ns && c.woke_ns <= c.computed_ns && c.computed_ns <= c.published_ns && c.published_ns <= s.torque_received_ns,
+            s.plant_woke_ns <= c.woke_ns
+                && c.woke_ns <= c.computed_ns
+                && c.computed_ns <= c.published_ns
+                && c.published_ns <= s.torque_received_ns,
             "tick {}: plant woke {} controller woke {} computed {} handed over {} received {}",
-            r.tick, s.plant_woke_ns, c.woke_ns, c.computed_ns, c.published_ns, s.torque_received_ns
+            r.tick,
+            s.plant_woke_ns,
+            c.woke_ns,
+            c.computed_ns,
+            c.published_ns,
+            s.torque_received_ns
         );
     }
 
@@ -106,7 +114,10 @@ fn a_version_1_controller_is_refused_with_both_versions_named() {
         ("CONTRACT_VERSION = 2\n", "CONTRACT_VERSION = 1\n"),
         ("(ControllerDiagnostics, 144)", "(ControllerDiagnostics, 120)"),
         ("\"controller_diagnostics_v2\"", "\"controller_diagnostics\""),
-        (", woke_mono_ns=woke,\n                                     computed_mono_ns=computed, published_mono_ns=time.monotonic_ns())", ")"),
+        (
+            ", woke_mono_ns=woke,\n                                     computed_mono_ns=computed, published_mono_ns=time.monotonic_ns())",
+            ")",
+        ),
     ] {
         assert_eq!(v1.matches(from).count(), 1, "hold_controller.py changed: {from:?} not found once; update this test");
         v1 = v1.replace(from, to);
@@ -121,9 +132,15 @@ fn a_version_1_controller_is_refused_with_both_versions_named() {
     let old = dir.join("hold_controller_v1.py");
     std::fs::write(&old, v1).unwrap();
     std::fs::set_permissions(&old, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
-    let Some((_g, _t, mut plant, mut py)) =
-        rig_tests::python_rig("a_version_1_controller_is_refused", "py-v1", 1.0, &old, "iceoryx2, pinocchio, numpy", "iceoryx2==0.10.0 pin numpy", "")
-    else {
+    let Some((_g, _t, mut plant, mut py)) = rig_tests::python_rig(
+        "a_version_1_controller_is_refused",
+        "py-v1",
+        1.0,
+        &old,
+        "iceoryx2, pinocchio, numpy",
+        "iceoryx2==0.10.0 pin numpy",
+        "",
+    ) else {
         return;
     };
     let st = py.expect_exit(Duration::from_secs(60));

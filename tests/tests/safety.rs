@@ -149,24 +149,33 @@ fn a_valid_45_nm_on_joint_6_ends_in_a_velocity_reflex_at_rest_and_exit_status_4(
     assert_eq!(reflexes.len(), 1, "one reflex, latched to the end: {:?}", rec.events);
     let (k, text) = &reflexes[0];
     let k = *k;
-    c.check(text.contains("joint 6") && text.contains(&format!("{limit:.3} rad/s")), || format!("the event names joint 6 and its limit: {text}"));
+    c.check(text.contains("joint 6") && text.contains(&format!("{limit:.3} rad/s")), || {
+        format!("the event names joint 6 and its limit: {text}")
+    });
     let value: f64 = text.split("speed ").nth(1).and_then(|s| s.split(' ').next()).and_then(|v| v.parse().ok()).unwrap_or(f64::NAN);
     c.check(value.abs() > limit, || format!("the event names the value: {text}"));
     c.check(k > 200 && k < 260, || format!("reflex at tick {k}, the torque is added from tick 200"));
-    let flagged: Vec<u64> = rec.joint_state.iter().filter(|s| (s.flags & state_flags::REFLEX != 0) != (s.tick >= k)).map(|s| s.tick).collect();
+    let flagged: Vec<u64> =
+        rec.joint_state.iter().filter(|s| (s.flags & state_flags::REFLEX != 0) != (s.tick >= k)).map(|s| s.tick).collect();
     c.check(flagged.is_empty(), || format!("REFLEX flag set exactly from tick {k} on; wrong at ticks {flagged:?}"));
     let not_stopped = rec.joint_state.iter().filter(|s| s.tick >= k && s.plant_status != PlantStatus::SafeStop as u32).count();
     c.check(not_stopped == 0, || format!("{not_stopped} states after the reflex not in safe stop"));
 
-    let trace: Vec<String> = rec.joint_state.iter().filter(|s| s.tick + 2 >= k && s.tick <= k + 8).map(|s| format!("{}: {:.4}", s.tick, s.qd[5])).collect();
+    let trace: Vec<String> =
+        rec.joint_state.iter().filter(|s| s.tick + 2 >= k && s.tick <= k + 8).map(|s| format!("{}: {:.4}", s.tick, s.qd[5])).collect();
     eprintln!("joint 6 speed around the reflex (tick: rad/s): {}", trace.join(", "));
     let qd6_max = rec.joint_state.iter().map(|s| s.qd[5].abs()).fold(0.0, f64::max);
     eprintln!("joint 6: peak speed {qd6_max:.4} rad/s = {:.2} % of its axis speed {limit:.4} rad/s", 100.0 * qd6_max / limit);
     c.check(qd6_max <= 1.1 * limit, || format!("joint 6 reached {qd6_max:.4} rad/s, more than 10 % above its axis speed {limit:.4} rad/s"));
     // At rest within 200 ms of the reflex: from then on |q̇6| < 1 % of the axis speed.
     let rest = rec.joint_state.iter().rev().take_while(|s| s.qd[5].abs() < 0.01 * limit).last().map(|s| s.tick);
-    eprintln!("joint 6 at rest (< 1 % of the axis speed) from tick {rest:?}, {} ms after the reflex", rest.map_or(-1, |r| r as i64 - k as i64));
-    c.check(rest.is_some_and(|r| r <= k + 200), || format!("joint 6 not at rest within 200 ms of the reflex at tick {k} (rest from {rest:?})"));
+    eprintln!(
+        "joint 6 at rest (< 1 % of the axis speed) from tick {rest:?}, {} ms after the reflex",
+        rest.map_or(-1, |r| r as i64 - k as i64)
+    );
+    c.check(rest.is_some_and(|r| r <= k + 200), || {
+        format!("joint 6 not at rest within 200 ms of the reflex at tick {k} (rest from {rest:?})")
+    });
 
     let last = run.last_line();
     eprintln!("{last}");
@@ -203,7 +212,11 @@ fn an_end_stop_holds_a_joint_driven_into_it() {
     let top_speed = rec.joint_state.iter().map(|s| s.qd[j].abs()).fold(0.0, f64::max);
     // What the joint pushes the stop with at the end: the applied torque less gravity.
     let s = scenario::Scenario::load(&t.scenario).unwrap();
-    let arm = robot::Robot::irb2400_with_tool(robot::Tool::wheel_on_bracket(s.robot.tool_mass_kg, s.robot.tool_offset_m, s.robot.wheel_radius_mm * 1e-3));
+    let arm = robot::Robot::irb2400_with_tool(robot::Tool::wheel_on_bracket(
+        s.robot.tool_mass_kg,
+        s.robot.tool_offset_m,
+        s.robot.wheel_radius_mm * 1e-3,
+    ));
     let tau_last = rec.joint_torque.last().unwrap().torque.tau[j];
     let pushing = tau_last - arm.gravity_torque(&robot::Vec6::from(last.q))[j];
     let expected_deg = pushing / (TORQUE_LIMIT_NM[j] / 0.25);
@@ -216,13 +229,20 @@ fn an_end_stop_holds_a_joint_driven_into_it() {
     );
     c.check(worst > 0.0, || format!("joint 5 never reached its stop (deepest {worst} deg)"));
     c.check(worst < 2.0, || format!("joint 5 {worst:.3} deg past its range"));
-    c.check(past(last) > 0.0 && last.qd[j].abs() < 1e-3, || format!("held in the stop at the end: {:.4} deg past, {} rad/s", past(last), last.qd[j]));
-    c.check((pushing - press).abs() < 0.05 * press, || format!("the controller pushes with {pushing:.2} N m at the end, not about its saturation {press} N m"));
-    c.check((past(last) - expected_deg).abs() < 0.05 * expected_deg, || format!("held at {:.4} deg, the stop's spring says {expected_deg:.4} deg", past(last)));
+    c.check(past(last) > 0.0 && last.qd[j].abs() < 1e-3, || {
+        format!("held in the stop at the end: {:.4} deg past, {} rad/s", past(last), last.qd[j])
+    });
+    c.check((pushing - press).abs() < 0.05 * press, || {
+        format!("the controller pushes with {pushing:.2} N m at the end, not about its saturation {press} N m")
+    });
+    c.check((past(last) - expected_deg).abs() < 0.05 * expected_deg, || {
+        format!("held at {:.4} deg, the stop's spring says {expected_deg:.4} deg", past(last))
+    });
     let stops = events(&rec, EventKind::EndStop);
     eprintln!("end-stop events: {stops:?}");
     c.check(stops.len() == 1 && stops[0].1.contains("joint 5"), || format!("one end_stop event naming joint 5: {stops:?}"));
-    let wrong: Vec<u64> = rec.joint_state.iter().filter(|s| (s.flags & state_flags::END_STOP != 0) != (s.q[j] > hi)).map(|s| s.tick).collect();
+    let wrong: Vec<u64> =
+        rec.joint_state.iter().filter(|s| (s.flags & state_flags::END_STOP != 0) != (s.q[j] > hi)).map(|s| s.tick).collect();
     c.check(wrong.is_empty(), || format!("END_STOP flag exactly while beyond the range; wrong at ticks {wrong:?}"));
     c.check(events(&rec, EventKind::Reflex).is_empty(), || format!("no reflex at this speed: {:?}", events(&rec, EventKind::Reflex)));
     c.done();
@@ -308,7 +328,8 @@ fn a_stranger_on_the_torque_service_moves_nothing_and_is_recorded_once() {
     let summary = plant_summary(&plant);
     let mut c = Checks::default();
 
-    let sent: u64 = stranger.stderr().split("published ").nth(1).and_then(|s| s.split(' ').next()).and_then(|n| n.parse().ok()).unwrap_or(0);
+    let sent: u64 =
+        stranger.stderr().split("published ").nth(1).and_then(|s| s.split(' ').next()).and_then(|n| n.parse().ok()).unwrap_or(0);
     eprintln!("stranger published {sent} torques; the plant ignored {} foreign answers", summary["foreign_answers"]);
     c.check(sent > 500, || format!("the stranger published only {sent} torques: {}", stranger.stderr()));
     // The plant sees a stranger's answer only when it comes in before the active controller's
@@ -331,8 +352,11 @@ fn a_stranger_on_the_torque_service_moves_nothing_and_is_recorded_once() {
         }
     }
     eprintln!("applied torque equals the active controller's answer bit for bit on {} of {compared} ticks", compared - differ.len());
-    c.check(compared > 1000 && differ.is_empty(), || format!("applied differs from commanded at {} of {compared} ticks: {:?}", differ.len(), &differ[..differ.len().min(10)]));
-    let ids: std::collections::BTreeSet<u64> = rec.joint_torque.iter().filter(|r| r.torque.controller_id != 0).map(|r| r.torque.controller_id).collect();
+    c.check(compared > 1000 && differ.is_empty(), || {
+        format!("applied differs from commanded at {} of {compared} ticks: {:?}", differ.len(), &differ[..differ.len().min(10)])
+    });
+    let ids: std::collections::BTreeSet<u64> =
+        rec.joint_torque.iter().filter(|r| r.torque.controller_id != 0).map(|r| r.torque.controller_id).collect();
     c.check(ids.len() == 1, || format!("one controller_id applied: {ids:x?}"));
     let tau1 = rec.joint_torque.iter().map(|r| r.torque.tau[0].abs()).fold(0.0, f64::max);
     let q1_0 = rec.joint_state[0].q[0];
@@ -382,7 +406,11 @@ fn in_lockstep_a_stranger_changes_not_one_bit() {
     for (a, b) in alone.joint_torque.iter().zip(&with.joint_torque) {
         assert_eq!(bits(&a.torque.tau), bits(&b.torque.tau), "applied torque of tick {} differs", a.tick);
     }
-    assert!(summary["foreign_answers"].as_u64().unwrap_or(0) > 0, "the stranger's answers never reached the plant: {}", summary["foreign_answers"]);
+    assert!(
+        summary["foreign_answers"].as_u64().unwrap_or(0) > 0,
+        "the stranger's answers never reached the plant: {}",
+        summary["foreign_answers"]
+    );
     assert_eq!(foreign.len(), 1, "{foreign:?}");
 }
 
@@ -455,18 +483,29 @@ fn a_slow_controller_s_safe_stop_gives_exit_4() {
     eprintln!("{last}");
     assert_eq!(st.code(), Some(4), "{}", run.logs());
     let first: u64 = last.split("first at tick ").nth(1).and_then(|s| s.trim_end_matches(')').parse().ok()).unwrap_or(0);
-    assert!(last.starts_with("rig: exit 4: 1 safe stop (first at tick ") && !last.contains("refused") && !last.contains("reflex"), "{last}");
+    assert!(
+        last.starts_with("rig: exit 4: 1 safe stop (first at tick ") && !last.contains("refused") && !last.contains("reflex"),
+        "{last}"
+    );
     // The controller connects within the first ticks of a real-time run, then misses from 300 on.
     assert!((319..=330).contains(&first), "safe stop at the 20th miss after tick 300, not {first}: {last}");
     let rec = run.recording();
-    assert!(rec.joint_state.iter().all(|s| s.tick <= 300 || s.total_misses + 300 >= s.tick), "every tick from 300 on is a miss (the state of tick k counts the misses before k)");
+    assert!(
+        rec.joint_state.iter().all(|s| s.tick <= 300 || s.total_misses + 300 >= s.tick),
+        "every tick from 300 on is a miss (the state of tick k counts the misses before k)"
+    );
     // No answer came in time for those ticks: the applied torque is recorded as no answer's,
     // held from (or, in the safe stop, after) an answer to an earlier state.
     let late: Vec<_> = rec.joint_torque.iter().filter(|r| r.tick > 300).collect();
     assert!(!late.is_empty());
     for r in late {
         let (answered, status) = (r.torque.tick, r.torque.controller_status);
-        assert!(r.held && answered < r.tick && status == recordings::STATUS_NO_ANSWER, "tick {}: held {}, answered {answered}, status {status}", r.tick, r.held);
+        assert!(
+            r.held && answered < r.tick && status == recordings::STATUS_NO_ANSWER,
+            "tick {}: held {}, answered {answered}, status {status}",
+            r.tick,
+            r.held
+        );
     }
 }
 
@@ -484,7 +523,18 @@ fn a_sweep_reports_a_case_with_exit_4_as_such() {
     let mut sweep = Daemon::start(
         "rig sweep",
         &bin("rig"),
-        &["sweep", scenario.to_str().unwrap(), "--set", "loop.substeps=10,20", "--duration", "0.4", "--controller", ctrl.to_str().unwrap(), "--out", out.to_str().unwrap()],
+        &[
+            "sweep",
+            scenario.to_str().unwrap(),
+            "--set",
+            "loop.substeps=10,20",
+            "--duration",
+            "0.4",
+            "--controller",
+            ctrl.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
         &dir,
     );
     let st = sweep.expect_exit(LONG);
@@ -570,16 +620,33 @@ fn dead_controller_under_rig_run(mode: &str) {
     let kill_tick = tick_at_wall_ns(&rec, kill_ns).unwrap_or(0);
     let ended = events(&rec, EventKind::ControllerEnded);
     let stop_pos = rec.events.iter().position(|e| e.kind == Some(EventKind::Stop));
-    let ended_pos = rec.events.iter().position(|e| e.kind == Some(EventKind::ControllerEnded) && e.text.contains("controller process ended (killed by signal 9)"));
-    eprintln!("controller killed at about tick {kill_tick}; controller_ended events {ended:?}; events: {:?}", rec.events.iter().map(|e| (e.tick, e.kind_name.as_str())).collect::<Vec<_>>());
-    c.check(ended_pos.is_some() && stop_pos.is_some() && ended_pos < stop_pos, || format!("a controller_ended entry naming the signal before the plant's stop: {:?}", rec.events));
+    let ended_pos = rec
+        .events
+        .iter()
+        .position(|e| e.kind == Some(EventKind::ControllerEnded) && e.text.contains("controller process ended (killed by signal 9)"));
+    eprintln!(
+        "controller killed at about tick {kill_tick}; controller_ended events {ended:?}; events: {:?}",
+        rec.events.iter().map(|e| (e.tick, e.kind_name.as_str())).collect::<Vec<_>>()
+    );
+    c.check(ended_pos.is_some() && stop_pos.is_some() && ended_pos < stop_pos, || {
+        format!("a controller_ended entry naming the signal before the plant's stop: {:?}", rec.events)
+    });
     let safe = events(&rec, EventKind::SafeStop);
     c.check(!safe.is_empty() && safe[0].0 >= kill_tick, || format!("the plant entered the safe stop after the kill: {safe:?}"));
-    if let (Some(e), Some(s)) = (ended.iter().find(|e| e.1.contains("process ended")), rec.events.iter().find(|e| e.kind == Some(EventKind::Stop))) {
-        eprintln!("reported {} ms after the kill; the safe stop at tick {:?}; the plant stopped {} ms after the report", e.0 as i64 - kill_tick as i64, safe.first().map(|s| s.0), s.tick as i64 - e.0 as i64);
+    if let (Some(e), Some(s)) =
+        (ended.iter().find(|e| e.1.contains("process ended")), rec.events.iter().find(|e| e.kind == Some(EventKind::Stop)))
+    {
+        eprintln!(
+            "reported {} ms after the kill; the safe stop at tick {:?}; the plant stopped {} ms after the report",
+            e.0 as i64 - kill_tick as i64,
+            safe.first().map(|s| s.0),
+            s.tick as i64 - e.0 as i64
+        );
         c.check(e.0 <= kill_tick + 50, || format!("reported at tick {}, killed at {kill_tick}", e.0));
         let stop_after = s.tick as i64 - e.0 as i64;
-        c.check(mode == "lockstep" || (90..=250).contains(&stop_after), || format!("the plant stopped {stop_after} ms after the report, rig waits 100 ms"));
+        c.check(mode == "lockstep" || (90..=250).contains(&stop_after), || {
+            format!("the plant stopped {stop_after} ms after the report, rig waits 100 ms")
+        });
         let status = rec.joint_state.iter().filter(|st| st.tick > e.0).map(|st| st.plant_status).collect::<std::collections::BTreeSet<_>>();
         c.check(status == [PlantStatus::SafeStop as u32].into(), || format!("states after the report: statuses {status:?}"));
     }
@@ -648,7 +715,9 @@ fn a_controller_stopped_for_200_ms_during_the_roll_resumes_bumplessly() {
             let (all, all_at, _) = largest_step(&rec, g, k + 300);
             eprintln!("largest step including those after host misses ({} held ticks): {all:.3} N m at tick {all_at}", host_held.len());
             let (step, at, j) = largest_step_where(&rec, g, k + 300, |t| !host_held.contains(&t));
-            eprintln!("largest applied-torque step from the first good answer to 300 ms after the clear: {step:.3} N m on joint {j} at tick {at}");
+            eprintln!(
+                "largest applied-torque step from the first good answer to 300 ms after the clear: {step:.3} N m on joint {j} at tick {at}"
+            );
             // Where it happens: the torque on that joint, the contact, force control.
             for k in at.saturating_sub(3)..=at + 2 {
                 let tau = rec.joint_torque.iter().find(|r| r.tick == k).map_or(f64::NAN, |r| r.torque.tau[j - 1]);
@@ -685,7 +754,10 @@ fn the_default_lockstep_run_has_no_torque_step_above_15_nm() {
     let last = rec.joint_torque.last().map_or(0, |r| r.tick);
     let (step, at, j) = largest_step(&rec, 0, last);
     let onset = rec.controller.iter().find(|d| d.force_control_active != 0).map(|d| d.tick);
-    eprintln!("largest per-tick torque step {step:.3} N m on joint {j} at tick {at} (force control from tick {onset:?}), {} ticks", rec.joint_torque.len());
+    eprintln!(
+        "largest per-tick torque step {step:.3} N m on joint {j} at tick {at} (force control from tick {onset:?}), {} ticks",
+        rec.joint_torque.len()
+    );
     assert!(step <= 15.0, "joint {j} steps {step:.3} N m at tick {at} (force control from tick {onset:?})");
 }
 
@@ -705,7 +777,10 @@ fn a_plant_stopped_for_300_ms_does_not_end_the_controller() {
     plant.signal(libc::SIGCONT);
     let ps = plant.expect_exit(LONG);
     let cs = ctrl.expect_exit(Duration::from_secs(10));
-    eprintln!("plant {ps}, controller {cs}; controller's log:\n{}", ctrl.stderr().lines().filter(|l| !l.contains("INFO")).collect::<Vec<_>>().join("\n"));
+    eprintln!(
+        "plant {ps}, controller {cs}; controller's log:\n{}",
+        ctrl.stderr().lines().filter(|l| !l.contains("INFO")).collect::<Vec<_>>().join("\n")
+    );
     assert!(ps.success(), "plant: {}", plant.stderr());
     let summary = plant_summary(&plant);
     assert_eq!(summary["stopped_by_signal"], false, "{summary}");

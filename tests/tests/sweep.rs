@@ -65,7 +65,8 @@ fn a_bad_case_is_refused_before_any_run_starts() {
     let rig = unique_rig("sweepbad");
     let dir = temp_dir(&rig);
     let out = dir.join("sweep");
-    let mut sweep = Daemon::start("rig sweep", &bin("rig"), &["sweep", "--set", "bulge.height_mm=0.1,abc", "--out", out.to_str().unwrap()], &dir);
+    let mut sweep =
+        Daemon::start("rig sweep", &bin("rig"), &["sweep", "--set", "bulge.height_mm=0.1,abc", "--out", out.to_str().unwrap()], &dir);
     let st = sweep.expect_exit(LONG);
     let err = sweep.stderr();
     assert!(!st.success());

@@ -51,7 +51,11 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
     let dir = temp_dir(&rig);
     let script = dir.join("slow-controller");
     // SCHED_FIFO 80 as the rig's own controller: on time when it is not sleeping.
-    std::fs::write(&script, format!("#!/bin/sh\nexec {} \"$@\" --sleep-us 700 --every 100 --rt-priority 80\n", bin("fault-controller").display())).unwrap();
+    std::fs::write(
+        &script,
+        format!("#!/bin/sh\nexec {} \"$@\" --sleep-us 700 --every 100 --rt-priority 80\n", bin("fault-controller").display()),
+    )
+    .unwrap();
     std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
     let mut run = rig_timing(&dir, "6", Some(&script));
     let st = run.expect_exit(Duration::from_secs(120));
@@ -65,7 +69,9 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
     // The ticks it delayed: every 100th that it answered at all (its stamps came, in time or
     // late; a tick whose state it never saw, because it woke after the next one, it did not delay).
     let stamped = |k: u64| {
-        rec.timing.iter().any(|t| t.timing.stages.is_some_and(|s| (t.tick == k && s.controller.is_some()) || s.late.is_some_and(|l| l.0 == k)))
+        rec.timing
+            .iter()
+            .any(|t| t.timing.stages.is_some_and(|s| (t.tick == k && s.controller.is_some()) || s.late.is_some_and(|l| l.0 == k)))
     };
     // Left out too: a tick whose state the plant itself published late (it skipped periods or
     // its budget was cut at the next deadline; the plant's stamps say so), as happens on this
@@ -76,10 +82,15 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
     let plant_late = |k: u64| {
         let s = rec.timing.iter().find(|t| t.tick == k).and_then(|t| t.timing.stages);
         let own = s.and_then(|s| s.controller);
-        let late = rec.timing.iter().find_map(|t| t.timing.stages.and_then(|s| s.late).filter(|l| l.0 == k).map(|l| (t.timing.stages.unwrap(), l.1)));
+        let late = rec
+            .timing
+            .iter()
+            .find_map(|t| t.timing.stages.and_then(|s| s.late).filter(|l| l.0 == k).map(|l| (t.timing.stages.unwrap(), l.1)));
         let woke_after_publish = match (s, own, late) {
             (Some(s), Some(c), _) => c.woke_ns - s.state_published_ns,
-            (Some(s), None, Some((at, c))) => c.woke_ns + (at.deadline_since_start_ns as i64 - s.deadline_since_start_ns as i64) - s.state_published_ns,
+            (Some(s), None, Some((at, c))) => {
+                c.woke_ns + (at.deadline_since_start_ns as i64 - s.deadline_since_start_ns as i64) - s.state_published_ns
+            }
             _ => 0,
         };
         s.is_some_and(|s| {
@@ -90,7 +101,11 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
     };
     let every_100th: Vec<u64> = (first + 1..=last).filter(|&k| k % 100 == 0).collect();
     let delayed: Vec<u64> = every_100th.iter().copied().filter(|&k| stamped(k) && !plant_late(k)).collect();
-    eprintln!("{} of {} 100th ticks delayed (the rest unseen by the controller, published late or woken for late)", delayed.len(), every_100th.len());
+    eprintln!(
+        "{} of {} 100th ticks delayed (the rest unseen by the controller, published late or woken for late)",
+        delayed.len(),
+        every_100th.len()
+    );
     assert!(delayed.len() >= 40, "{} delayed ticks from tick {first} to {last}", delayed.len());
     let mut wrong = Vec::new();
     for &k in &delayed {
@@ -104,7 +119,9 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
     let host_delayed: Vec<String> = delayed
         .iter()
         .filter(|&&k| a.cause_of_tick(k) == Some(Cause::Host))
-        .map(|&k| format!("{:?}", rec.timing.iter().filter(|t| t.tick + 1 >= k && t.tick <= k + 1).map(|t| t.timing.stages).collect::<Vec<_>>()))
+        .map(|&k| {
+            format!("{:?}", rec.timing.iter().filter(|t| t.tick + 1 >= k && t.tick <= k + 1).map(|t| t.timing.stages).collect::<Vec<_>>())
+        })
         .collect();
     eprintln!("{} delayed ticks; attribution {:?}; {} misses in all", delayed.len(), a.by_cause, a.misses);
     assert!(host_delayed.is_empty(), "delayed ticks attributed to the host, with the stamps of the ticks around them: {host_delayed:#?}");
@@ -113,7 +130,12 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
     // The table rig timing printed is the attribution of its recording, and rig report prints it too.
     let compute_line = format!("| controller compute over its share | {} |", a.count(Cause::ControllerCompute));
     assert!(out.contains(&compute_line), "{compute_line:?} not in:\n{out}");
-    let mut report = Daemon::start("report", &bin("rig"), &["report", recording(&dir).to_str().unwrap(), "--out", dir.join("report").to_str().unwrap()], &dir);
+    let mut report = Daemon::start(
+        "report",
+        &bin("rig"),
+        &["report", recording(&dir).to_str().unwrap(), "--out", dir.join("report").to_str().unwrap()],
+        &dir,
+    );
     assert!(report.expect_exit(Duration::from_secs(120)).success(), "rig report: {}", report.stderr());
     let report = report.stdout();
     assert_eq!(table_lines(&report), table_lines(&out), "rig report's cause table differs from rig timing's:\n{report}");
@@ -158,7 +180,11 @@ fn a_100_ms_stall_of_both_daemons_is_a_host_burst_and_the_run_completes() {
     let stall_tick = tick_at_wall_ns(&rec, stopped_at).expect("stopped during the run");
     eprintln!("stopped at tick {stall_tick}; bursts {:?}; skipped {}; causes {:?}", a.bursts, a.skipped_periods, a.by_cause);
     // The tick after the stall: the plant skipped the periods it slept through.
-    let after = rec.timing.iter().find(|t| t.tick >= stall_tick && t.timing.stages.is_some_and(|s| s.skipped_periods > 0)).expect("a skip after the stall");
+    let after = rec
+        .timing
+        .iter()
+        .find(|t| t.tick >= stall_tick && t.timing.stages.is_some_and(|s| s.skipped_periods > 0))
+        .expect("a skip after the stall");
     let skipped = after.timing.stages.unwrap().skipped_periods;
     assert!((90..=400).contains(&skipped), "{skipped} periods skipped after a 100 ms stop");
     // The burst starts at the tick the stop caught (it woke 100 ms late) or at the one after it.

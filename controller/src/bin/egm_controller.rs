@@ -20,7 +20,10 @@ use prost::Message;
 use robot::Vec6;
 
 #[derive(Debug, Parser)]
-#[command(name = "egm-controller", about = "EGM force controller (admittance on the measured force) for the weatherstrip rig's EGM robot or a real IRB 2400")]
+#[command(
+    name = "egm-controller",
+    about = "EGM force controller (admittance on the measured force) for the weatherstrip rig's EGM robot or a real IRB 2400"
+)]
 struct Args {
     /// Scenario TOML file (trajectory, force references, [egm] section).
     #[arg(long)]
@@ -44,7 +47,8 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> anyhow::Result<()> {
     let s = scenario::Scenario::load(&args.scenario)?;
-    let sock = UdpSocket::bind(&s.egm.sensor_address).map_err(|e| anyhow::anyhow!("binding the EGM sensor address {}: {e}", s.egm.sensor_address))?;
+    let sock = UdpSocket::bind(&s.egm.sensor_address)
+        .map_err(|e| anyhow::anyhow!("binding the EGM sensor address {}: {e}", s.egm.sensor_address))?;
     sock.set_read_timeout(Some(Duration::from_millis(100)))?;
     let mut law = EgmForceLaw::new(&s);
     let d = *law.design();
@@ -97,8 +101,15 @@ fn run(args: &Args) -> anyhow::Result<()> {
         let o = law.step(&EgmInput { t_s, q: Vec6::from(egm::axes::dh_from_abb_deg(&deg)), force_sensor_n });
         seqno = seqno.wrapping_add(1);
         let reply = pb::EgmSensor {
-            header: Some(pb::EgmHeader { seqno: Some(seqno), tm: None, mtype: Some(pb::egm_header::MessageType::MsgtypeCorrection as i32) }),
-            planned: Some(pb::EgmPlanned { joints: Some(pb::EgmJoints { joints: egm::axes::abb_deg_from_dh(&o.q_ref.into()).to_vec() }), ..Default::default() }),
+            header: Some(pb::EgmHeader {
+                seqno: Some(seqno),
+                tm: None,
+                mtype: Some(pb::egm_header::MessageType::MsgtypeCorrection as i32),
+            }),
+            planned: Some(pb::EgmPlanned {
+                joints: Some(pb::EgmJoints { joints: egm::axes::abb_deg_from_dh(&o.q_ref.into()).to_vec() }),
+                ..Default::default()
+            }),
             speed_ref: None,
         };
         out.clear();

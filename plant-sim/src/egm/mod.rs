@@ -73,7 +73,8 @@ pub struct EgmParams {
 impl EgmParams {
     pub fn from_scenario(s: &Scenario, mode: Mode, n_ticks: u64) -> anyhow::Result<EgmParams> {
         let e = &s.egm;
-        let sensor: SocketAddr = e.sensor_address.parse().map_err(|err| anyhow::anyhow!("egm.sensor_address {:?}: {err}", e.sensor_address))?;
+        let sensor: SocketAddr =
+            e.sensor_address.parse().map_err(|err| anyhow::anyhow!("egm.sensor_address {:?}: {err}", e.sensor_address))?;
         Ok(EgmParams {
             mode,
             period_ns: (s.loop_.period_s * 1e9).round() as u64,
@@ -139,7 +140,12 @@ fn fill_joints(j: &mut Option<pb::EgmJoints>, values: &[f64; 6]) {
 impl<'a> EgmLoop<'a> {
     /// Bind the robot's UDP socket (an ephemeral port; the sensor answers to it) and set up the
     /// servo at the plant's start pose.
-    pub fn new(s: &Scenario, physics: &'a mut Physics, recorder: Option<&'a mut Recorder>, params: EgmParams) -> anyhow::Result<EgmLoop<'a>> {
+    pub fn new(
+        s: &Scenario,
+        physics: &'a mut Physics,
+        recorder: Option<&'a mut Recorder>,
+        params: EgmParams,
+    ) -> anyhow::Result<EgmLoop<'a>> {
         let bind: SocketAddr = if params.sensor.is_ipv4() { "0.0.0.0:0".parse()? } else { "[::]:0".parse()? };
         let sock = UdpSocket::bind(bind).map_err(|e| anyhow::anyhow!("binding the EGM robot's UDP socket: {e}"))?;
         sock.set_nonblocking(true)?;
@@ -147,12 +153,19 @@ impl<'a> EgmLoop<'a> {
         let servo = Servo::new(ServoParams::from_scenario(s), servo_model(s), q0);
         let robot_msg = pb::EgmRobot {
             header: Some(pb::EgmHeader::default()),
-            feed_back: Some(pb::EgmFeedBack { joints: joints(6), cartesian: pose(), external_joints: None, time: Some(pb::EgmClock::default()) }),
+            feed_back: Some(pb::EgmFeedBack {
+                joints: joints(6),
+                cartesian: pose(),
+                external_joints: None,
+                time: Some(pb::EgmClock::default()),
+            }),
             planned: Some(pb::EgmPlanned { joints: joints(6), cartesian: pose(), external_joints: None, time: None }),
             motor_state: Some(pb::EgmMotorState { state: pb::egm_motor_state::MotorStateType::MotorsOn as i32 }),
             mci_state: Some(pb::EgmMciState::default()),
             mci_convergence_met: Some(false),
-            rapid_exec_state: Some(pb::EgmRapidCtrlExecState { state: pb::egm_rapid_ctrl_exec_state::RapidCtrlExecStateType::RapidRunning as i32 }),
+            rapid_exec_state: Some(pb::EgmRapidCtrlExecState {
+                state: pb::egm_rapid_ctrl_exec_state::RapidCtrlExecStateType::RapidRunning as i32,
+            }),
             measured_force: Some(pb::EgmMeasuredForce { fc_active: Some(true), force: Vec::with_capacity(6) }),
             utilization_rate: None,
         };
@@ -398,7 +411,11 @@ impl EgmLoop<'_> {
             // 3. Session timeout: no valid sensor message for comm_timeout (wall clock).
             if self.state == SessionState::Running && rt::now_mono_ns().saturating_sub(last_valid_ns) > p.comm_timeout_ns {
                 let mut s = StackText::new();
-                let _ = write!(s, "tick {tick}: EGM session ended: no valid sensor message for {} s (egm.comm_timeout_s); the robot holds", p.comm_timeout_ns as f64 * 1e-9);
+                let _ = write!(
+                    s,
+                    "tick {tick}: EGM session ended: no valid sensor message for {} s (egm.comm_timeout_s); the robot holds",
+                    p.comm_timeout_ns as f64 * 1e-9
+                );
                 self.end_session(tick, s.as_str(), &mut stats, &mut es);
             }
             // 4. The servo's torque over this tick, integrated.
@@ -485,7 +502,13 @@ impl EgmLoop<'_> {
             stats.active_sim_s = (tick - k0) as f64 * p.period_ns as f64 * 1e-9;
         }
         let mut s = StackText::new();
-        let _ = write!(s, "plant stopped after {tick} ticks ({}); EGM: {} references accepted, {} refused", if stats.stopped_by_signal { "signal" } else { "duration reached" }, es.accepted, es.refused);
+        let _ = write!(
+            s,
+            "plant stopped after {tick} ticks ({}); EGM: {} references accepted, {} refused",
+            if stats.stopped_by_signal { "signal" } else { "duration reached" },
+            es.accepted,
+            es.refused
+        );
         self.event(tick, EventKind::Stop, s.as_str());
         (stats, es)
     }

@@ -59,7 +59,8 @@ impl ServoParams {
 
     /// The lag this servo realises, s: `d + T/2 + 1/ω_c`.
     pub fn lag_s(&self) -> f64 {
-        (self.delay_ticks as f64 + self.delay_frac + 0.5) * self.period_s + if self.correction_radps > 0.0 { 1.0 / self.correction_radps } else { 0.0 }
+        (self.delay_ticks as f64 + self.delay_frac + 0.5) * self.period_s
+            + if self.correction_radps > 0.0 { 1.0 / self.correction_radps } else { 0.0 }
     }
 }
 
@@ -81,7 +82,16 @@ pub struct Servo {
 impl Servo {
     /// A servo holding `q0` at rest; `model` is the controller's robot model.
     pub fn new(p: ServoParams, model: Robot, q0: Vec6) -> Servo {
-        Servo { p, model, line: Box::new([(q0, Vec6::zeros()); MAX_DELAY_TICKS]), head: 0, r: q0, v: Vec6::zeros(), q_r: q0, qd_r: Vec6::zeros() }
+        Servo {
+            p,
+            model,
+            line: Box::new([(q0, Vec6::zeros()); MAX_DELAY_TICKS]),
+            head: 0,
+            r: q0,
+            v: Vec6::zeros(),
+            q_r: q0,
+            qd_r: Vec6::zeros(),
+        }
     }
 
     pub fn params(&self) -> &ServoParams {
@@ -149,7 +159,14 @@ mod tests {
 
     fn params(delay_ticks: usize, fc_hz: f64) -> ServoParams {
         let w_s = 2.0 * std::f64::consts::PI * 30.0;
-        ServoParams { period_s: 1e-3, delay_ticks, delay_frac: 0.0, correction_radps: 2.0 * std::f64::consts::PI * fc_hz, kp: w_s * w_s, kd: 2.0 * w_s }
+        ServoParams {
+            period_s: 1e-3,
+            delay_ticks,
+            delay_frac: 0.0,
+            correction_radps: 2.0 * std::f64::consts::PI * fc_hz,
+            kp: w_s * w_s,
+            kd: 2.0 * w_s,
+        }
     }
 
     #[test]

@@ -21,16 +21,32 @@ pub enum Refusal {
     Malformed,
     NoSequenceNumber,
     /// `seqno` not greater than the last accepted one.
-    Sequence { seqno: u32, last: u32 },
+    Sequence {
+        seqno: u32,
+        last: u32,
+    },
     /// No joint references (pose references are not emulated).
     NoJoints,
     JointCount(usize),
     /// Axis `axis` (1-based) reference beyond its range (degrees, ABB convention).
-    Range { axis: usize, deg: f64, lo: f64, hi: f64 },
+    Range {
+        axis: usize,
+        deg: f64,
+        lo: f64,
+        hi: f64,
+    },
     /// Reaching the reference within one cycle needs this axis speed (degrees/s) over the limit.
-    Speed { axis: usize, deg_s: f64, limit: f64 },
+    Speed {
+        axis: usize,
+        deg_s: f64,
+        limit: f64,
+    },
     /// A speed reference over the axis speed (degrees/s).
-    SpeedRef { axis: usize, deg_s: f64, limit: f64 },
+    SpeedRef {
+        axis: usize,
+        deg_s: f64,
+        limit: f64,
+    },
 }
 
 impl std::fmt::Display for Refusal {
@@ -42,8 +58,12 @@ impl std::fmt::Display for Refusal {
             Refusal::NoJoints => write!(f, "no joint references (planned.joints)"),
             Refusal::JointCount(n) => write!(f, "{n} joint references, the robot has 6"),
             Refusal::Range { axis, deg, lo, hi } => write!(f, "axis {axis} reference {deg:.3} deg beyond its range {lo:.0} .. {hi:.0} deg"),
-            Refusal::Speed { axis, deg_s, limit } => write!(f, "axis {axis} reference needs {deg_s:.1} deg/s within one cycle, the axis speed is {limit:.0} deg/s"),
-            Refusal::SpeedRef { axis, deg_s, limit } => write!(f, "axis {axis} speed reference {deg_s:.1} deg/s beyond the axis speed {limit:.0} deg/s"),
+            Refusal::Speed { axis, deg_s, limit } => {
+                write!(f, "axis {axis} reference needs {deg_s:.1} deg/s within one cycle, the axis speed is {limit:.0} deg/s")
+            }
+            Refusal::SpeedRef { axis, deg_s, limit } => {
+                write!(f, "axis {axis} speed reference {deg_s:.1} deg/s beyond the axis speed {limit:.0} deg/s")
+            }
         }
     }
 }
@@ -179,7 +199,8 @@ mod tests {
         pb::EgmSensor {
             header: Some(pb::EgmHeader { seqno, tm: None, mtype: Some(pb::egm_header::MessageType::MsgtypeCorrection as i32) }),
             planned: Some(pb::EgmPlanned { joints: Some(pb::EgmJoints { joints: joints.to_vec() }), ..Default::default() }),
-            speed_ref: (!speeds.is_empty()).then(|| pb::EgmSpeedRef { joints: Some(pb::EgmJoints { joints: speeds.to_vec() }), ..Default::default() }),
+            speed_ref: (!speeds.is_empty())
+                .then(|| pb::EgmSpeedRef { joints: Some(pb::EgmJoints { joints: speeds.to_vec() }), ..Default::default() }),
         }
         .encode_to_vec()
     }
@@ -195,11 +216,21 @@ mod tests {
         assert_eq!(rules.check(buf.decode(&msg(Some(3), &zero, &[])).unwrap()).unwrap_err(), Refusal::Sequence { seqno: 3, last: 3 });
         assert_eq!(rules.check(buf.decode(&msg(None, &zero, &[])).unwrap()).unwrap_err(), Refusal::NoSequenceNumber);
         // axis 3's range is -60 .. 65 deg
-        assert!(matches!(rules.check(buf.decode(&msg(Some(4), &[0.0, 0.0, 66.0, 0.0, 0.0, 0.0], &[])).unwrap()), Err(Refusal::Range { axis: 3, .. })));
+        assert!(matches!(
+            rules.check(buf.decode(&msg(Some(4), &[0.0, 0.0, 66.0, 0.0, 0.0, 0.0], &[])).unwrap()),
+            Err(Refusal::Range { axis: 3, .. })
+        ));
         // 1 deg within 4 ms on axis 1 is 250 deg/s, over its 150 deg/s
-        assert!(matches!(rules.check(buf.decode(&msg(Some(5), &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0], &[])).unwrap()), Err(Refusal::Speed { axis: 1, .. })));
-        assert!(matches!(rules.check(buf.decode(&msg(Some(6), &zero, &[0.0, 0.0, 0.0, 0.0, 0.0, 500.0])).unwrap()), Err(Refusal::SpeedRef { axis: 6, .. })));
-        let ok = rules.check(buf.decode(&msg(Some(7), &[0.5, 0.0, 0.0, 0.0, 0.0, 0.0], &[10.0, 0.0, 0.0, 0.0, 0.0, 0.0])).unwrap()).unwrap();
+        assert!(matches!(
+            rules.check(buf.decode(&msg(Some(5), &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0], &[])).unwrap()),
+            Err(Refusal::Speed { axis: 1, .. })
+        ));
+        assert!(matches!(
+            rules.check(buf.decode(&msg(Some(6), &zero, &[0.0, 0.0, 0.0, 0.0, 0.0, 500.0])).unwrap()),
+            Err(Refusal::SpeedRef { axis: 6, .. })
+        ));
+        let ok =
+            rules.check(buf.decode(&msg(Some(7), &[0.5, 0.0, 0.0, 0.0, 0.0, 0.0], &[10.0, 0.0, 0.0, 0.0, 0.0, 0.0])).unwrap()).unwrap();
         assert_eq!(ok.seqno, 7);
         assert!((ok.qd_ref[0] - 10f64.to_radians()).abs() < 1e-15);
         // a later message without speed references has none (the buffer forgets the old ones)

@@ -11,11 +11,7 @@ use std::process::Command;
 
 /// Whether python3 has `mcap` and `mcap-ros2-support`; prints `SKIP:` with the fix if not.
 pub fn python_ready() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import mcap, mcap_ros2.decoder"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
+    let ok = Command::new("python3").args(["-c", "import mcap, mcap_ros2.decoder"]).output().map(|o| o.status.success()).unwrap_or(false);
     if !ok {
         println!("SKIP: python3 with the `mcap` and `mcap-ros2-support` packages is not available (pip install mcap mcap-ros2-support)");
     }
@@ -47,9 +43,8 @@ pub fn python_read(file: &Path) -> (Value, String) {
 pub fn assert_same_as_python(rec: &Recording, py: &Value) {
     let what = rec.path.display();
     assert_eq!(rec.integrity.kind(), py["kind"].as_str().unwrap(), "{what}: kind; python says {}", py["detail"]);
-    let rows = |topic: &str, col: usize| -> Vec<u64> {
-        py["rows"][topic].as_array().unwrap().iter().map(|r| r[col].as_u64().unwrap()).collect()
-    };
+    let rows =
+        |topic: &str, col: usize| -> Vec<u64> { py["rows"][topic].as_array().unwrap().iter().map(|r| r[col].as_u64().unwrap()).collect() };
     let same = |topic: &str, ours: Vec<u64>, col: usize| {
         let theirs = rows(topic, col);
         assert_eq!(ours.len(), theirs.len(), "{what}: {topic} message count (column {col}), python {}", py["detail"]);

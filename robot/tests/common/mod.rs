@@ -30,11 +30,8 @@ impl Rng {
 /// physical link inertias, so no identity can pass by the symmetry of Table 7.1.
 pub fn random_arm(seed: u64) -> Robot {
     let mut rng = Rng::new(seed);
-    let dh: [DhRow; 6] = std::array::from_fn(|_| DhRow {
-        d_m: rng.uniform(-0.5, 0.5),
-        a_m: rng.uniform(-0.5, 0.5),
-        alpha_rad: rng.uniform(-3.0, 3.0),
-    });
+    let dh: [DhRow; 6] =
+        std::array::from_fn(|_| DhRow { d_m: rng.uniform(-0.5, 0.5), a_m: rng.uniform(-0.5, 0.5), alpha_rad: rng.uniform(-3.0, 3.0) });
     let links: [LinkRow; 6] = std::array::from_fn(|_| {
         // Inertia about the COM: principal moments obeying the triangle inequality, rotated.
         let (p1, p2) = (rng.uniform(0.01, 1.0), rng.uniform(0.01, 1.0));

@@ -142,7 +142,11 @@ fn run(a: &Args) -> anyhow::Result<u64> {
         // SAFETY: a plain syscall on the calling thread with a valid parameter.
         let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
         if rc != 0 {
-            eprintln!("fault-controller: SCHED_FIFO {} refused ({}): default scheduler", a.rt_priority, std::io::Error::from_raw_os_error(rc));
+            eprintln!(
+                "fault-controller: SCHED_FIFO {} refused ({}): default scheduler",
+                a.rt_priority,
+                std::io::Error::from_raw_os_error(rc)
+            );
         }
     }
     let role = if a.stranger { "stranger" } else { "fault-controller" };

@@ -69,10 +69,7 @@ fn run(a: &Args) -> anyhow::Result<()> {
         let t0 = Instant::now();
         last_state = t0;
         if a.contract_version == CONTRACT_VERSION && st.contract_version != CONTRACT_VERSION {
-            anyhow::bail!(
-                "{}",
-                messages::check_version(CONTRACT_VERSION, st.contract_version, "joint state").unwrap_err()
-            );
+            anyhow::bail!("{}", messages::check_version(CONTRACT_VERSION, st.contract_version, "joint state").unwrap_err());
         }
         if st.plant_status == PlantStatus::ShuttingDown as u32 {
             return Ok(());
