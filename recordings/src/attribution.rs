@@ -384,7 +384,7 @@ pub fn format_table(a: &Attribution) -> String {
         s += "misses not attributed: the recording has no stage stamps\n";
         return s;
     }
-    s += &format!("| cause of a miss | misses | rate |\n| --- | --- | --- |\n");
+    s += "| cause of a miss | misses | rate |\n| --- | --- | --- |\n";
     let rate = |n: u64| n as f64 / a.periods as f64;
     for c in Cause::ALL {
         let n = a.count(c);
