@@ -417,7 +417,7 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
     Ok(code)
 }
 
-/// `rig sweep`: every case in lockstep, in process (one per core at a time), then the table; exit 0 only if every case is clean, 4 if
+/// `rig sweep`: every case in lockstep (in process, one per core at a time; with `--controller`, with both daemons, one after the other), then the table; exit 0 only if every case is clean, 4 if
 /// every case reached its end but some with a safe stop, reflex, refused torque or an incomplete
 /// recording, 1 if a case failed, 130/143 if the sweep was interrupted.
 fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
@@ -439,49 +439,48 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
         check_duration("--duration", a.launch.duration, &s, &path)?;
         planned.push((case_dir, path, label));
     }
-    // After every case's scenario is checked, so that a bad value is named first.
-    anyhow::ensure!(
-        a.launch.controller.is_none(),
-        "rig sweep runs its cases in process with the built-in controller; --controller needs rig run"
-    );
-    plant_sim::rt::install_stop_signals();
-    let cache_dir = strip::cache::cache_dir();
-    let models = sweep::SharedModels::new(&cache_dir);
     let n_cases = planned.len();
-    let done = sweep::run_cases(&planned, |n, (case_dir, path, label)| {
-        let recording = case_dir.join("run.mcap");
-        let rig = format!("sweep-case-{n:02}");
-        let summary = in_process::run(&rig, path, a.launch.duration, &recording, |s| models.physics(s));
-        let (ending, summary) = match summary {
-            Ok(v) if v["stopped_by_signal"].as_bool() == Some(true) => (Ending::Interrupted, Some(v)),
-            Ok(v) => (Ending::Completed, Some(v)),
-            Err(e) => (Ending::PlantFailed(format!("{e:#}")), None),
-        };
-        let outcome = supervise::Outcome { ending, plant_summary: summary };
-        let exit_code = outcome.exit_code();
-        let line = summary::status_line(exit_code, &outcome.ending, outcome.plant_summary.as_ref());
-        let status = line.split_once(": ").and_then(|(_, rest)| rest.split_once(": ")).map_or(line.clone(), |(_, why)| why.to_string());
-        eprintln!("rig sweep: case {}/{n_cases}: {label}: {line}", n + 1);
-        let summary = outcome.plant_summary.as_ref();
-        let numbers = recordings::cli::summary_numbers(&recording).ok();
-        let rolling = numbers.as_ref().and_then(|n| n.rolling.clone());
-        let stopped = matches!(outcome.ending, Ending::Interrupted | Ending::Terminated);
-        let result = sweep::CaseResult {
-            label: label.clone(),
-            scenario: path.clone(),
-            recording: recording.clone(),
-            exit_code,
-            status,
-            misses: summary.and_then(|v| v.get("misses")).and_then(serde_json::Value::as_u64),
-            safe_stops: summary.and_then(|v| v.get("safe_stops")).and_then(serde_json::Value::as_u64),
-            force_error_max_n: rolling.as_ref().and_then(|r| r.force_error_max_abs_n),
-            force_error_rms_n: rolling.as_ref().and_then(|r| r.force_error_rms_n),
-            bond_share: rolling.as_ref().and_then(|r| r.bond_pressure_share),
-            bond_weakest_pa: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[0]),
-            bond_weakest_z_m: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[1]),
-        };
-        (result, stopped)
-    });
+    let done: Vec<(sweep::CaseResult, bool)> = if let Some(controller) = &a.launch.controller {
+        // A controller of the user's: each case with both daemons over iceoryx2, one after the
+        // other (a Ctrl-C or SIGTERM stops the sweep, not just the case).
+        let rt = runtime()?;
+        let mut done = Vec::with_capacity(n_cases);
+        for (n, (case_dir, path, label)) in planned.iter().enumerate() {
+            let mut l = prepare(
+                supervise::unique_rig_name(),
+                path.clone(),
+                Some("lockstep".into()),
+                ("--duration", a.launch.duration),
+                Some(case_dir.clone()),
+                Some(controller.clone()),
+                None,
+            )?;
+            l.quiet = true;
+            let outcome = rt.block_on(supervise::supervise(&l))?;
+            let (result, stopped) = case_result(n, n_cases, label, path, &l.recording, outcome);
+            done.push((result, stopped));
+            if stopped {
+                break;
+            }
+        }
+        done
+    } else {
+        // The built-in controller: every case in process, one per core at a time.
+        plant_sim::rt::install_stop_signals();
+        let cache_dir = strip::cache::cache_dir();
+        let models = sweep::SharedModels::new(&cache_dir);
+        sweep::run_cases(&planned, |n, (case_dir, path, label)| {
+            let recording = case_dir.join("run.mcap");
+            let rig = format!("sweep-case-{n:02}");
+            let summary = in_process::run(&rig, path, a.launch.duration, &recording, |s| models.physics(s));
+            let (ending, summary) = match summary {
+                Ok(v) if v["stopped_by_signal"].as_bool() == Some(true) => (Ending::Interrupted, Some(v)),
+                Ok(v) => (Ending::Completed, Some(v)),
+                Err(e) => (Ending::PlantFailed(format!("{e:#}")), None),
+            };
+            case_result(n, n_cases, label, path, &recording, supervise::Outcome { ending, plant_summary: summary })
+        })
+    };
     let interrupted = done.iter().any(|(_, stopped)| *stopped).then_some(130);
     if interrupted.is_some() {
         eprintln!("rig sweep: interrupted");
@@ -492,6 +491,40 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
     std::fs::write(&json, serde_json::to_string_pretty(&results)?).with_context(|| format!("writing {}", json.display()))?;
     println!("cases, recordings and {} in {}", json.file_name().unwrap_or_default().to_string_lossy(), dir.display());
     Ok(interrupted.unwrap_or_else(|| sweep::sweep_exit_code(&results)))
+}
+
+/// One sweep case's row from how it ended and its recording; true if it was stopped by a signal.
+fn case_result(
+    n: usize,
+    n_cases: usize,
+    label: &str,
+    path: &Path,
+    recording: &Path,
+    outcome: supervise::Outcome,
+) -> (sweep::CaseResult, bool) {
+    let exit_code = outcome.exit_code();
+    let line = summary::status_line(exit_code, &outcome.ending, outcome.plant_summary.as_ref());
+    let status = line.split_once(": ").and_then(|(_, rest)| rest.split_once(": ")).map_or(line.clone(), |(_, why)| why.to_string());
+    eprintln!("rig sweep: case {}/{n_cases}: {label}: {line}", n + 1);
+    let summary = outcome.plant_summary.as_ref();
+    let numbers = recordings::cli::summary_numbers(recording).ok();
+    let rolling = numbers.as_ref().and_then(|n| n.rolling.clone());
+    let stopped = matches!(outcome.ending, Ending::Interrupted | Ending::Terminated);
+    let result = sweep::CaseResult {
+        label: label.to_string(),
+        scenario: path.to_path_buf(),
+        recording: recording.to_path_buf(),
+        exit_code,
+        status,
+        misses: summary.and_then(|v| v.get("misses")).and_then(serde_json::Value::as_u64),
+        safe_stops: summary.and_then(|v| v.get("safe_stops")).and_then(serde_json::Value::as_u64),
+        force_error_max_n: rolling.as_ref().and_then(|r| r.force_error_max_abs_n),
+        force_error_rms_n: rolling.as_ref().and_then(|r| r.force_error_rms_n),
+        bond_share: rolling.as_ref().and_then(|r| r.bond_pressure_share),
+        bond_weakest_pa: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[0]),
+        bond_weakest_z_m: rolling.as_ref().and_then(|r| r.bond_weakest_pa_at_z_m).map(|w| w[1]),
+    };
+    (result, stopped)
 }
 
 fn main() {

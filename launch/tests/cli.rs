@@ -118,18 +118,13 @@ fn bad_flag_values_are_refused_before_any_daemon_starts_naming_the_flag() {
             [cmd, &["--duration", "0.0004"]].concat(),
             vec!["--duration 0.0004: shorter than one control period (loop.period_s = 0.001 s"],
         ));
+        cases.push((
+            [cmd, &["--controller", "/nonexistent/controller"]].concat(),
+            vec!["--controller /nonexistent/controller: No such file or directory (os error 2)"],
+        ));
+        cases.push(([cmd, &["--controller", "/"]].concat(), vec!["--controller /: not a file"]));
         cases.push(([cmd, &["--out", under_a_file.as_str()]].concat(), vec!["--out ", "a-file/out"]));
     }
-    cases.push((
-        vec!["run", "--controller", "/nonexistent/controller"],
-        vec!["--controller /nonexistent/controller: No such file or directory (os error 2)"],
-    ));
-    cases.push((vec!["run", "--controller", "/"], vec!["--controller /: not a file"]));
-    // sweep cases run in process with the built-in controller: any --controller is refused
-    cases.push((
-        vec!["sweep", "--set", "bulge.height_mm=0.1", "--controller", "/nonexistent/controller"],
-        vec!["rig sweep runs its cases in process with the built-in controller; --controller needs rig run"],
-    ));
     cases.push((vec!["run", "--mode", "fast"], vec!["'--mode <MODE>'"]));
     cases.push((vec!["run", "--set", "bulge.heigth_mm=1"], vec!["--set", "no scenario field bulge.heigth_mm; [bulge] has height_mm"]));
     cases.push((vec!["run", "--set", "loop.period_s"], vec!["--set", "expected section.field=v1,v2,..."]));

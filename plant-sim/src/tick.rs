@@ -39,6 +39,13 @@ pub struct FirstTicks {
     pub refusal: Option<u64>,
 }
 
+/// Queue slots a lockstep tick waits for before it advances: its tick record and the events one
+/// tick can raise (a decision's, a reflex's, an end stop's) with room to spare.
+const LOCKSTEP_RECORD_SLOTS: usize = 16;
+/// The longest a lockstep tick waits for the writer; after that the record is a counted drop
+/// (a writer that no longer drains its queue must not hang the run).
+const LOCKSTEP_RECORD_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// The plant between ticks: physics, gate, limits and what the next state reports.
 pub struct PlantTick {
     physics: Physics,
@@ -188,6 +195,11 @@ impl PlantTick {
     /// integrate the tick, check reflexes and end stops of the new state, and move on to the
     /// next tick.
     pub fn advance(&mut self, torque: Option<&JointTorque>, mut recorder: Option<&mut Recorder>) -> TickOutcome {
+        // Lockstep has no deadline: wait for the writer (on a loaded host it falls behind a plant
+        // running 30x real time) instead of dropping this tick's record and events.
+        if let Some(r) = recorder.as_deref().filter(|_| self.lockstep) {
+            r.wait_for_room(LOCKSTEP_RECORD_SLOTS, LOCKSTEP_RECORD_WAIT);
+        }
         let tick = self.tick;
         let t = self.sim_time_s();
         let decision = self.gate.decide(torque, &self.physics.gravity_torque(), &self.physics.qd());

@@ -487,6 +487,25 @@ impl Recorder {
         self.producer.as_ref().map_or(0, |p| p.slots())
     }
 
+    /// For a producer with no deadline (lockstep): sleep in steps of [`Self::ROOM_POLL`] until
+    /// the queue has `slots` free, the writer stopped, or `limit` passed. True if there is room.
+    /// Never for real time, where a full queue is a counted drop instead.
+    pub fn wait_for_room(&self, slots: usize, limit: std::time::Duration) -> bool {
+        let t0 = Instant::now();
+        loop {
+            if self.queue_free() >= slots {
+                return true;
+            }
+            if self.is_stopped() || self.producer.is_none() || t0.elapsed() >= limit {
+                return false;
+            }
+            std::thread::sleep(Self::ROOM_POLL);
+        }
+    }
+
+    /// How often [`Self::wait_for_room`] looks at the queue again.
+    pub const ROOM_POLL: std::time::Duration = std::time::Duration::from_micros(100);
+
     pub fn path(&self) -> &Path {
         &self.path
     }

@@ -255,6 +255,8 @@ fn sigkill_of_rig_sweep_ends_both_daemons_within_a_second() {
     let dir = temp_dir(&rig);
     let scenario = write_scenario(&dir, "lockstep", "");
     let out = dir.join("out");
+    // A controller of the user's: the cases run with both daemons (without one, in process).
+    let controller = bin("controller");
     kill_launcher(
         "rig-sweep",
         &[
@@ -264,6 +266,8 @@ fn sigkill_of_rig_sweep_ends_both_daemons_within_a_second() {
             "loop.max_consecutive_misses=20,21",
             "--duration",
             "3000",
+            "--controller",
+            controller.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
         ],
