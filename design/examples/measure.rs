@@ -1,7 +1,7 @@
 //! Acceptance numbers from a recording: `measure RUN.mcap SCENARIO.toml`.
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let rec = recordings::read::Recording::open(&args[1])?;
+    let rec = recording_tools::read::Recording::open(&args[1])?;
     let s = scenario::Scenario::load(std::path::Path::new(&args[2]))?;
     let t = design::metrics::tracking_from_recording(&rec, &s)?;
     println!("tracking over the roll: max {:.4} N, rms {:.4} N ({} ticks)", t.max_n, t.rms_n, t.samples);

@@ -4,7 +4,7 @@
 //! task z) has left `z_start` and not yet reached `z_end` — exactly the thesis' Figure 6.7 window.
 //! Tracking error per tick: | |bottom force| − |force reference| |.
 
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use scenario::Scenario;
 
 use crate::servo::Tracking;

@@ -976,7 +976,7 @@ impl WriterThread {
         });
         record(&mut out, op::DATA_END, &crc.to_le_bytes());
         record(&mut out, op::FOOTER, &[0u8; 20]);
-        out.extend_from_slice(crate::read::MCAP_MAGIC);
+        out.extend_from_slice(crate::MCAP_MAGIC);
         out
     }
 

@@ -282,7 +282,7 @@ pub fn python_rig(
 /// restarted controller's first command differs from the safe-stop torque by up to ~1000 N m on
 /// joint 2 here, as it pulls the sagged arm back to its start pose; applied at once, that is the
 /// jump this rules out.)
-pub fn assert_no_jump(rec: &recordings::read::Recording, takeover: u64) {
+pub fn assert_no_jump(rec: &recording_tools::read::Recording, takeover: u64) {
     let rows: Vec<_> = rec.joint_torque.iter().filter(|t| t.tick + 5 >= takeover && t.tick <= takeover + 100).collect();
     assert!(rows.len() > 50, "takeover at tick {takeover} too close to the end");
     for w in rows.windows(2) {
@@ -310,7 +310,7 @@ pub fn wall_ns() -> u64 {
 }
 
 /// The first tick the plant published at or after the wall-clock time `ns` (from `/timing`).
-pub fn tick_at_wall_ns(rec: &recordings::read::Recording, ns: u64) -> Option<u64> {
+pub fn tick_at_wall_ns(rec: &recording_tools::read::Recording, ns: u64) -> Option<u64> {
     rec.timing.iter().find(|t| t.timing.publish_wall_ns >= ns).map(|t| t.tick)
 }
 
@@ -347,7 +347,7 @@ mod tests {
 /// pressures), as bits.
 /// Two recordings with the same digest agree bit for bit on all of them; wall clocks are left
 /// out, so a lockstep run's digest is the same on every machine and every day.
-pub fn physics_digest(rec: &recordings::read::Recording) -> String {
+pub fn physics_digest(rec: &recording_tools::read::Recording) -> String {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     let mut put = |x: u64| {
         for b in x.to_le_bytes() {

@@ -11,7 +11,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use rig_tests::*;
 use scenario::Scenario;
 
@@ -161,7 +161,7 @@ fn bonds_the_whole_rolled_length(file: &str) {
     eprintln!("{file}: weakest centre-line pressure under the wheel {:.1} kPa at z = {:.1} mm", weakest.1 * 1e-3, weakest.0 * 1e3);
     assert!(weakest.1 >= 100e3, "{file}: z = {} mm saw only {} Pa under the wheel", weakest.0 * 1e3, weakest.1);
     // The report's share over the whole roll agrees.
-    let share = recordings::report::numbers(&rec).rolling.and_then(|r| r.bond_pressure_share).unwrap();
+    let share = recording_tools::report::numbers(&rec).rolling.and_then(|r| r.bond_pressure_share).unwrap();
     assert!(share >= 0.999, "{file}: report: {share}");
 }
 

@@ -391,12 +391,12 @@ pub fn format_outcome(o: &ReplayOutcome) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::schema::TorqueRow;
+    use recordings::schema::TorqueRow;
 
     fn recording(held: &[bool], ids: &[u64], status: &[u32]) -> Recording {
         let mut rec = Recording::default();
         for k in 0..held.len() {
-            let mut r = crate::TickRecord::default();
+            let mut r = recordings::TickRecord::default();
             r.state.tick = k as u64;
             r.state.plant_status = status[k];
             rec.joint_state.push(r.state);
