@@ -93,6 +93,20 @@ pub fn incidents(v: &Value) -> Vec<String> {
     out
 }
 
+impl crate::supervise::Outcome {
+    /// `rig run`'s exit status: a run that reached its end is 0 only without safe stop, reflex,
+    /// refused torque or an incomplete recording (and with the plant's summary to say so), else 4;
+    /// 2, 3, 130, 143 by the ending.
+    pub fn exit_code(&self) -> i32 {
+        use crate::supervise::Ending;
+        match (&self.ending, &self.plant_summary) {
+            (Ending::Completed, Some(v)) if incidents(v).is_empty() => 0,
+            (Ending::Completed, _) => 4,
+            (e, _) => e.exit_code(),
+        }
+    }
+}
+
 /// The last line of `rig run`'s summary: the exit status and why.
 pub fn status_line(code: i32, ending: &crate::supervise::Ending, plant_summary: Option<&Value>) -> String {
     use crate::supervise::Ending;

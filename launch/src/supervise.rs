@@ -54,7 +54,7 @@ pub enum Ending {
 
 impl Ending {
     /// Process exit code of `rig run` for this ending, before the plant's summary is read
-    /// (a completed run is 0 or 4: [`Outcome::exit_code`]).
+    /// (a completed run is 0 or 4: `Outcome::exit_code`, in `summary` with the incidents it counts).
     pub fn exit_code(&self) -> i32 {
         match self {
             Ending::Completed => 0,
@@ -71,19 +71,6 @@ impl Ending {
 pub struct Outcome {
     pub ending: Ending,
     pub plant_summary: Option<serde_json::Value>,
-}
-
-impl Outcome {
-    /// `rig run`'s exit status: a run that reached its end is 0 only without safe stop, reflex,
-    /// refused torque or an incomplete recording (and with the plant's summary to say so), else 4;
-    /// 2, 3, 130, 143 by the ending.
-    pub fn exit_code(&self) -> i32 {
-        match (&self.ending, &self.plant_summary) {
-            (Ending::Completed, Some(v)) if crate::summary::incidents(v).is_empty() => 0,
-            (Ending::Completed, _) => 4,
-            (e, _) => e.exit_code(),
-        }
-    }
 }
 
 /// How long the plant gets between rig's report that the controller ended (SIGUSR1) and its

@@ -4,7 +4,7 @@
 //! pressure under the wheel against the wheel position.
 
 use crate::plots::{self, LinePlot, Series};
-use crate::read::Recording;
+use crate::read::{open_for, Recording};
 use crate::report::{self, interpolate, rolling_ticks, ReportNumbers, BOND_PRESSURE_PA};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
@@ -76,7 +76,7 @@ pub fn compare(paths: &[PathBuf], out_dir: &Path, allow_truncated: bool) -> anyh
     anyhow::ensure!(paths.len() >= 2, "rig compare needs at least two recordings, got {}", paths.len());
     let recs: Vec<Recording> = paths
         .iter()
-        .map(|p| crate::cli::open_for(p, allow_truncated).with_context(|| format!("opening {}", p.display())))
+        .map(|p| open_for(p, allow_truncated).with_context(|| format!("opening {}", p.display())))
         .collect::<anyhow::Result<_>>()?;
     let names = column_names(paths);
     let numbers: Vec<ReportNumbers> = recs.iter().map(report::numbers).collect();

@@ -553,6 +553,19 @@ impl Drop for Mapped {
     }
 }
 
+/// Opens a recording for a command: a cut or corrupt file is an error unless `allow_truncated`.
+pub fn open_for(path: &Path, allow_truncated: bool) -> anyhow::Result<Recording> {
+    let rec = Recording::open(path)?;
+    if let Some(e) = rec.damage_error() {
+        if !allow_truncated {
+            let flag = if matches!(e, ReadError::Cut { .. }) { "--allow-truncated" } else { "--allow-damaged" };
+            return Err(anyhow::Error::new(e).context(format!("pass {flag} to use the intact ticks before the damage")));
+        }
+        tracing::warn!("{e}; using the intact ticks before it");
+    }
+    Ok(rec)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

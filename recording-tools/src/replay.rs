@@ -8,8 +8,7 @@
 //! ticks are counted and left out. Everything else must match a deterministic controller exactly
 //! in lockstep.
 
-use crate::cli::{open_for, ReplayArgs};
-use crate::read::Recording;
+use crate::read::{open_for, Recording};
 use anyhow::{bail, Context};
 use messages::ports::{PlantPorts, Wake};
 use messages::{PlantStatus, DOF};
@@ -17,6 +16,38 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+
+/// `rig replay FILE [--speed X] [--controller PATH]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ReplayArgs {
+    /// The recording (.mcap).
+    pub file: PathBuf,
+    /// Republish at X times the recorded rate. Default: lockstep (wait for each torque, as fast as
+    /// the controller answers) when --controller is given, else the recorded rate (1).
+    #[arg(long)]
+    pub speed: Option<f64>,
+    /// Controller executable to drive open-loop from the recording and compare with the recorded
+    /// torques (it is started as `PATH --rig NAME --scenario FILE`; `--controller` alone or
+    /// `--controller auto` takes the `controller` next to this executable). Without it, replay only republishes; a controller
+    /// you start yourself on the printed rig name is compared too.
+    #[arg(long, num_args = 0..=1, default_missing_value = "auto")]
+    pub controller: Option<PathBuf>,
+    /// Scenario file for the controller (default: the scenario stored in the recording).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Rig name to publish on (default: a fresh `replay-<pid>`).
+    #[arg(long)]
+    pub rig: Option<String>,
+    /// Longest wait for one torque in lockstep, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub watchdog: f64,
+    /// Also write the comparison as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Replay a cut (killed run) or corrupt file up to its first bad chunk instead of refusing it.
+    #[arg(long, visible_alias = "allow-damaged")]
+    pub allow_truncated: bool,
+}
 
 /// How the replayed controller's torques differ from the recorded ones.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -382,6 +382,19 @@ impl Default for TickRecord {
     }
 }
 
+/// An error with its sources, `outer: inner: ...` (mcap's I/O error hides the OS error otherwise);
+/// the writer's and the live view's messages.
+pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut cur = e.source();
+    while let Some(c) = cur {
+        s.push_str(": ");
+        s.push_str(&c.to_string());
+        cur = c.source();
+    }
+    s
+}
+
 /// Simulated time of a tick in ns: added to the run's wall-clock start, the MCAP log (and publish)
 /// time of every message of that tick.
 pub fn sim_time_ns(sim_time_s: f64) -> u64 {
