@@ -5,7 +5,8 @@
 
 use crate::plots::{self, LinePlot, Series};
 use crate::read::{open_for, Recording};
-use crate::report::{self, interpolate, rolling_ticks, ReportNumbers, BOND_PRESSURE_PA};
+use crate::report::{self, interpolate, ReportNumbers, BOND_PRESSURE_PA};
+use crate::tracking;
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 
@@ -100,16 +101,13 @@ pub fn compare(paths: &[PathBuf], out_dir: &Path, allow_truncated: bool) -> anyh
         ..Default::default()
     };
     for (rec, name) in recs.iter().zip(&names) {
-        let roll = rolling_ticks(rec);
-        let ctrl = rec.controller_by_tick();
+        let ticks = report::tracking_ticks(rec);
+        let roll = tracking::rolling_ticks(&ticks);
         let z_nodes = rec.centreline_z_m();
         let z_mm = |i: usize| rec.strip[i].wheel_z_m * 1e3;
         error.series.push(Series {
             label: name.clone(),
-            points: roll
-                .iter()
-                .filter_map(|&i| ctrl[i].map(|c| (z_mm(i), rec.strip[i].bottom_force_n.abs() - rec.controller[c].force_ref_n.abs())))
-                .collect(),
+            points: roll.iter().filter_map(|&i| ticks[i].force_error_n().map(|e| (z_mm(i), e))).collect(),
         });
         pressure.series.push(Series {
             label: name.clone(),

@@ -5,6 +5,7 @@
 //! - [`read::Recording`] reads a file back, checking every chunk's CRC (a cut or corrupt file up to
 //!   its first bad chunk, saying where and why).
 //! - [`report`] turns a recording into numbers and figures.
+//! - [`tracking`] is the rolling-phase force-tracking metric, one rule for every caller.
 //! - [`compare`] puts several recordings side by side.
 //! - [`replay`] drives a controller open-loop from a recording and compares its torques.
 //! - [`attribution`] says whose fault each missed tick of a real-time run is.
@@ -19,3 +20,4 @@ pub mod read;
 pub mod replay;
 pub mod report;
 pub mod tmpfs_test;
+pub mod tracking;
