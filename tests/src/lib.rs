@@ -4,9 +4,10 @@
 //!
 //! The binaries must be built first: `cargo build --release --workspace --bins`.
 
+use messages::child::{self, SpawnOptions};
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, Command, ExitStatus};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -89,9 +90,10 @@ impl Daemon {
     pub fn start(name: &str, bin: &Path, args: &[&str], dir: &Path) -> Daemon {
         let stdout_path = dir.join(format!("{name}.stdout"));
         let stderr_path = dir.join(format!("{name}.stderr"));
-        let child = Command::new(bin)
+        // No PDEATHSIG: it follows the spawning thread, and a test's thread may end before the
+        // daemons it hands on; the Drop below ends them.
+        let child = child::configure(&mut Command::new(bin), SpawnOptions::default())
             .args(args)
-            .stdin(Stdio::null())
             .stdout(std::fs::File::create(&stdout_path).unwrap())
             .stderr(std::fs::File::create(&stderr_path).unwrap())
             .spawn()
@@ -106,24 +108,13 @@ impl Daemon {
     /// Send a signal (e.g. `libc::SIGKILL`).
     pub fn signal(&self, sig: i32) {
         if let Some(c) = &self.child {
-            // SAFETY: signalling our own child.
-            unsafe { libc::kill(c.id() as i32, sig) };
+            child::signal(c.id(), sig);
         }
     }
 
     /// Wait up to `timeout` for the process to exit.
     pub fn wait_timeout(&mut self, timeout: Duration) -> Option<ExitStatus> {
-        let child = self.child.as_mut()?;
-        let t0 = Instant::now();
-        loop {
-            if let Some(s) = child.try_wait().unwrap() {
-                return Some(s);
-            }
-            if t0.elapsed() > timeout {
-                return None;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        child::wait_deadline(self.child.as_mut()?, timeout).unwrap()
     }
 
     /// Wait for the exit or panic (after killing it) with the process's stderr.
@@ -156,10 +147,7 @@ fn read(p: &Path) -> String {
 impl Drop for Daemon {
     fn drop(&mut self) {
         if let Some(mut c) = self.child.take() {
-            if let Ok(None) = c.try_wait() {
-                let _ = c.kill();
-            }
-            let _ = c.wait();
+            child::kill(&mut c);
         }
     }
 }
