@@ -179,7 +179,7 @@ mod tests {
         let s = stop(&mut stubborn, Duration::from_millis(200)).unwrap();
         assert_eq!(s.signal(), Some(libc::SIGKILL), "{s:?}");
         assert!(t0.elapsed() >= Duration::from_millis(200), "{:?}", t0.elapsed());
-        let mut polite = configure(&mut Command::new("sleep").arg("10"), SpawnOptions::default()).spawn().unwrap();
+        let mut polite = configure(Command::new("sleep").arg("10"), SpawnOptions::default()).spawn().unwrap();
         let s = stop(&mut polite, Duration::from_secs(5)).unwrap();
         assert_eq!(s.signal(), Some(libc::SIGTERM), "{s:?}");
         let mut quick = Command::new("true").spawn().unwrap();
