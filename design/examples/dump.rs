@@ -1,7 +1,7 @@
 //! Debug: print the first ticks of a recording.
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let r = recordings::read::Recording::open(&args[1])?;
+    let r = recording_tools::read::Recording::open(&args[1])?;
     let from: usize = args.get(2).map_or(0, |s| s.parse().unwrap());
     let n: usize = args.get(3).map_or(20, |s| s.parse().unwrap());
     for i in from..(from + n).min(r.joint_state.len()) {

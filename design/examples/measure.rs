@@ -1,9 +1,8 @@
-//! Acceptance numbers from a recording: `measure RUN.mcap SCENARIO.toml`.
+//! Acceptance numbers from a recording: `measure RUN.mcap`.
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let rec = recordings::read::Recording::open(&args[1])?;
-    let s = scenario::Scenario::load(std::path::Path::new(&args[2]))?;
-    let t = design::metrics::tracking_from_recording(&rec, &s)?;
+    let rec = recording_tools::read::Recording::open(&args[1])?;
+    let t = design::metrics::tracking_from_recording(&rec)?;
     println!("tracking over the roll: max {:.4} N, rms {:.4} N ({} ticks)", t.max_n, t.rms_n, t.samples);
     let p = design::metrics::peak_centreline_pressure(&rec, 4e-3, 36e-3);
     let worst = p.iter().cloned().fold((0.0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use controller::gains::Gains;
-use recordings::plots::{save_lines, LinePlot, Series};
+use recording_tools::plots::{save_lines, LinePlot, Series};
 use scenario::Scenario;
 use strip::StripModel;
 

@@ -11,6 +11,7 @@ use controller::model::{controller_robot, tool_down_rotation, TaskFrame};
 use controller::reference::{Phase, ReferenceGenerator, ReferenceParams};
 use messages::{JointState, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
 use plant_sim::physics::Physics;
+use recording_tools::tracking::{rolling_force_tracking, ForceTracking, TrackingTick};
 use recordings::StripRecord;
 use scenario::Scenario;
 
@@ -23,6 +24,8 @@ pub struct ServoSample {
     pub contact_force_n: f64,
     pub bottom_force_n: f64,
     pub wheel_z_m: f64,
+    /// The reference along the strip (task z), m.
+    pub z_ref_m: f64,
 }
 
 /// Tracking figures over the rolling phase (issue 6 acceptance metric):
@@ -34,18 +37,26 @@ pub struct Tracking {
     pub samples: usize,
 }
 
-/// Tracking figures of the `Roll` phase of `samples`.
+impl From<ForceTracking> for Tracking {
+    fn from(t: ForceTracking) -> Self {
+        Tracking { max_n: t.max_abs_n, rms_n: t.rms_n, samples: t.samples }
+    }
+}
+
+/// Tracking figures of the rolling phase of `samples`: the recordings' rule
+/// (`recording_tools::tracking`), zero without a rolling phase.
 pub fn tracking(samples: &[ServoSample]) -> Tracking {
-    let e: Vec<f64> =
-        samples.iter().filter(|s| s.phase == Phase::Roll).map(|s| (s.bottom_force_n.abs() - s.force_ref_n.abs()).abs()).collect();
-    if e.is_empty() {
-        return Tracking::default();
-    }
-    Tracking {
-        max_n: e.iter().cloned().fold(0.0, f64::max),
-        rms_n: (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt(),
-        samples: e.len(),
-    }
+    let ticks: Vec<TrackingTick> = samples
+        .iter()
+        .map(|s| TrackingTick {
+            in_contact: s.contact_force_n != 0.0,
+            z_ref_m: Some(s.z_ref_m),
+            wheel_z_m: s.wheel_z_m,
+            force_ref_n: Some(s.force_ref_n),
+            bottom_force_n: s.bottom_force_n,
+        })
+        .collect();
+    rolling_force_tracking(&ticks).map_or_else(Tracking::default, Tracking::from)
 }
 
 /// A whole in-process run: per-tick samples plus, per centre-line node, the largest bottom
@@ -117,6 +128,7 @@ pub fn run_servo_full(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow
             contact_force_n: rec.contact_force_n,
             bottom_force_n: rec.bottom_force_n,
             wheel_z_m: rec.wheel_z_m,
+            z_ref_m: diag.pos_ref_task_m[2],
         });
         if !tau.iter().all(|x| x.is_finite()) {
             anyhow::bail!("non-finite torque at tick {tick}");

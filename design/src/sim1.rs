@@ -45,6 +45,7 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
             contact_force_n: rec.contact_force_n,
             bottom_force_n: rec.bottom_force_n,
             wheel_z_m: rec.wheel_z_m,
+            z_ref_m: r.pos_m.z,
         });
         let a = if r.force_mode {
             impedance_accel(gains, &mut integral, r.force_y_n, f_meas, vy, period)

@@ -3,7 +3,7 @@
 //! wheel force at the same position (plus the bulge's static reactions, also from the full model).
 
 use anyhow::Context;
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use strip::sparse::Cholesky;
 use strip::system::FullSystem;
 use strip::{gaussian_weights, StripModel};

@@ -8,7 +8,7 @@
 //!   in-process lockstep run per case, several at once across the cores, tabulated from the
 //!   recordings.
 //! - `rig robot ...`, `rig model ...`, `rig replay`, `rig report`, `rig compare`, `rig design`: the tools of the
-//!   robot, strip, recordings and design crates.
+//!   robot, strip, recording-tools and design crates.
 //!
 //! `run`, `timing` and `sweep` check every flag and every scenario value before any daemon starts;
 //! a refusal names the flag (and the file, line and field of a scenario value).
@@ -50,11 +50,11 @@ enum Cmd {
         cmd: strip::cli::Command,
     },
     /// Republish a recording onto a rig (optionally driving a controller open-loop and comparing).
-    Replay(recordings::cli::ReplayArgs),
+    Replay(recording_tools::cli::ReplayArgs),
     /// Figures and numbers from a recording.
-    Report(recordings::cli::ReportArgs),
+    Report(recording_tools::cli::ReportArgs),
     /// Several recordings side by side: one table, the rolling phase overlaid.
-    Compare(recordings::cli::CompareArgs),
+    Compare(recording_tools::cli::CompareArgs),
     /// Force-loop design from the actual models (thesis Chapter 6).
     Design(design::cli::DesignArgs),
 }
@@ -323,15 +323,17 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
                 // Whose fault each miss is, from the recording's stage stamps (the one attribution
                 // `rig report` uses too).
                 if let Some(path) = v.get("recording").and_then(serde_json::Value::as_str) {
-                    match recordings::read::Recording::open(Path::new(path)) {
-                        Ok(rec) => print!("{}", recordings::attribution::format_table(&recordings::attribution::attribute(&rec.timing))),
+                    match recording_tools::read::Recording::open(Path::new(path)) {
+                        Ok(rec) => {
+                            print!("{}", recording_tools::attribution::format_table(&recording_tools::attribution::attribute(&rec.timing)))
+                        }
                         Err(e) => eprintln!("rig: could not read back {path} for the miss attribution: {e:#}"),
                     }
                 }
             }
             print!("{}", summary::run_summary(v));
             let path = v.get("recording").and_then(serde_json::Value::as_str).filter(|_| !timing);
-            let numbers = path.and_then(|path| match recordings::cli::summary_numbers(Path::new(path)) {
+            let numbers = path.and_then(|path| match recording_tools::cli::summary_numbers(Path::new(path)) {
                 Ok(n) => Some(n),
                 Err(e) => {
                     eprintln!("rig: could not read back {path}: {e:#}");
@@ -402,7 +404,7 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
     let recording = dir.join("run.mcap");
     let v = in_process::run(rig, scenario, duration_s, &recording, |s| plant_sim::physics::Physics::new(s, &cache_dir))?;
     print!("{}", summary::run_summary(&v));
-    let numbers = match recordings::cli::summary_numbers(&recording) {
+    let numbers = match recording_tools::cli::summary_numbers(&recording) {
         Ok(n) => Some(n),
         Err(e) => {
             eprintln!("rig: could not read back {}: {e:#}", recording.display());
@@ -507,7 +509,7 @@ fn case_result(
     let status = line.split_once(": ").and_then(|(_, rest)| rest.split_once(": ")).map_or(line.clone(), |(_, why)| why.to_string());
     eprintln!("rig sweep: case {}/{n_cases}: {label}: {line}", n + 1);
     let summary = outcome.plant_summary.as_ref();
-    let numbers = recordings::cli::summary_numbers(recording).ok();
+    let numbers = recording_tools::cli::summary_numbers(recording).ok();
     let rolling = numbers.as_ref().and_then(|n| n.rolling.clone());
     let stopped = matches!(outcome.ending, Ending::Interrupted | Ending::Terminated);
     let result = sweep::CaseResult {
@@ -583,9 +585,9 @@ fn main() {
         Cmd::Sweep(a) => run_sweep(a),
         Cmd::Robot { cmd } => robot::cli::run(cmd).map(|_| 0),
         Cmd::Model { cmd } => strip::cli::run(cmd).map(|_| 0),
-        Cmd::Replay(a) => recordings::cli::replay(a).map(|_| 0),
-        Cmd::Report(a) => recordings::cli::report(a).map(|_| 0),
-        Cmd::Compare(a) => recordings::cli::compare(a).map(|_| 0),
+        Cmd::Replay(a) => recording_tools::cli::replay(a).map(|_| 0),
+        Cmd::Report(a) => recording_tools::cli::report(a).map(|_| 0),
+        Cmd::Compare(a) => recording_tools::cli::compare(a).map(|_| 0),
         Cmd::Design(a) => design::cli::run(a).map(|_| 0),
     };
     match result {

@@ -1,6 +1,6 @@
 //! Human-readable summaries of a run and of a timing run, from the plant's JSON summary line.
 
-use recordings::report::ReportNumbers;
+use recording_tools::report::ReportNumbers;
 use serde_json::Value;
 
 fn num(v: &Value, key: &str) -> f64 {
@@ -49,7 +49,7 @@ pub fn run_summary(v: &Value) -> String {
 /// file does not say so itself.
 pub fn recording_summary(v: &Value, numbers: Option<&ReportNumbers>) -> String {
     let mut s = match numbers {
-        Some(n) => recordings::report::format_text(n),
+        Some(n) => recording_tools::report::format_text(n),
         None => format!("recording   {}\n", v.get("recording").and_then(Value::as_str).unwrap_or("(not recorded)")),
     };
     if let Some(why) = v.get("recording_stopped_early").and_then(Value::as_str) {
@@ -91,6 +91,20 @@ pub fn incidents(v: &Value) -> Vec<String> {
         out.push(format!("recording incomplete ({} dropped by the recorder)", plural(drops, "tick", "ticks")));
     }
     out
+}
+
+impl crate::supervise::Outcome {
+    /// `rig run`'s exit status: a run that reached its end is 0 only without safe stop, reflex,
+    /// refused torque or an incomplete recording (and with the plant's summary to say so), else 4;
+    /// 2, 3, 130, 143 by the ending.
+    pub fn exit_code(&self) -> i32 {
+        use crate::supervise::Ending;
+        match (&self.ending, &self.plant_summary) {
+            (Ending::Completed, Some(v)) if incidents(v).is_empty() => 0,
+            (Ending::Completed, _) => 4,
+            (e, _) => e.exit_code(),
+        }
+    }
 }
 
 /// The last line of `rig run`'s summary: the exit status and why.
@@ -233,14 +247,14 @@ mod tests {
     fn the_recording_and_an_early_stop_are_each_named_once() {
         let why = "disk full (ENOSPC) at tick 812: write failed";
         let v = serde_json::json!({"recording": "runs/x/run.mcap", "recording_stopped_early": why});
-        let rec = recordings::read::Recording { path: "runs/x/run.mcap".into(), ..Default::default() };
-        let read_back = |integrity: recordings::read::Integrity| {
-            let mut n = recordings::report::numbers(&rec);
+        let rec = recording_tools::read::Recording { path: "runs/x/run.mcap".into(), ..Default::default() };
+        let read_back = |integrity: recording_tools::read::Integrity| {
+            let mut n = recording_tools::report::numbers(&rec);
             (n.integrity, n.integrity_detail) = (integrity.kind(), integrity.describe());
             n
         };
-        let stopped = read_back(recordings::read::Integrity::StoppedEarly(why.into()));
-        let complete = read_back(recordings::read::Integrity::Complete);
+        let stopped = read_back(recording_tools::read::Integrity::StoppedEarly(why.into()));
+        let complete = read_back(recording_tools::read::Integrity::Complete);
         for s in [recording_summary(&v, None), recording_summary(&v, Some(&stopped)), recording_summary(&v, Some(&complete))] {
             assert_eq!(s.matches("runs/x/run.mcap").count(), 1, "{s}");
             assert_eq!(s.matches("stopped the recording early").count(), 1, "{s}");

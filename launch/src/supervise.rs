@@ -6,6 +6,7 @@ use std::process::{ExitStatus, Stdio};
 use std::time::Duration;
 
 use anyhow::Context;
+use messages::child::{describe_stopped, ended, SpawnOptions};
 use tokio::io::AsyncReadExt;
 use tokio::process::{Child, Command};
 use tokio::signal::unix::{signal, SignalKind};
@@ -54,7 +55,7 @@ pub enum Ending {
 
 impl Ending {
     /// Process exit code of `rig run` for this ending, before the plant's summary is read
-    /// (a completed run is 0 or 4: [`Outcome::exit_code`]).
+    /// (a completed run is 0 or 4: `Outcome::exit_code`, in `summary` with the incidents it counts).
     pub fn exit_code(&self) -> i32 {
         match self {
             Ending::Completed => 0,
@@ -71,19 +72,6 @@ impl Ending {
 pub struct Outcome {
     pub ending: Ending,
     pub plant_summary: Option<serde_json::Value>,
-}
-
-impl Outcome {
-    /// `rig run`'s exit status: a run that reached its end is 0 only without safe stop, reflex,
-    /// refused torque or an incomplete recording (and with the plant's summary to say so), else 4;
-    /// 2, 3, 130, 143 by the ending.
-    pub fn exit_code(&self) -> i32 {
-        match (&self.ending, &self.plant_summary) {
-            (Ending::Completed, Some(v)) if crate::summary::incidents(v).is_empty() => 0,
-            (Ending::Completed, _) => 4,
-            (e, _) => e.exit_code(),
-        }
-    }
 }
 
 /// How long the plant gets between rig's report that the controller ended (SIGUSR1) and its
@@ -146,63 +134,15 @@ pub fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
     Ok(p)
 }
 
-fn describe(status: ExitStatus) -> String {
-    use std::os::unix::process::ExitStatusExt;
-    match (status.code(), status.signal()) {
-        (Some(c), _) if c == messages::host::EXIT_SHARED_MEMORY => {
-            format!("exit status {c} (shared memory unusable, see its message above)")
-        }
-        (Some(c), _) if c == messages::host::EXIT_RIG_TAKEN => format!("exit status {c} (the rig name is taken)"),
-        (Some(c), _) => format!("exit status {c}"),
-        (None, Some(s)) => format!("killed by signal {s} ({})", signal_name(s)),
-        _ => "unknown status".into(),
-    }
-}
-
-fn signal_name(sig: i32) -> &'static str {
-    match sig {
-        libc::SIGBUS => "SIGBUS: a bus error, e.g. shared memory that /dev/shm could not back",
-        libc::SIGSEGV => "SIGSEGV",
-        libc::SIGABRT => "SIGABRT: it aborted",
-        libc::SIGKILL => "SIGKILL",
-        libc::SIGTERM => "SIGTERM",
-        libc::SIGINT => "SIGINT",
-        _ => "a signal",
-    }
-}
-
-/// "ended with exit status N (...)" or "was killed by signal N (...)".
-fn ended(status: ExitStatus) -> String {
-    use std::os::unix::process::ExitStatusExt;
-    if status.signal().is_some() {
-        format!("was {}", describe(status))
-    } else {
-        format!("ended with {}", describe(status))
-    }
-}
-
-/// How a daemon that `rig` stopped ended: "cleanly" only for exit status 0.
-fn describe_stopped(status: Option<ExitStatus>) -> String {
-    match status {
-        Some(s) if s.success() => "stopped cleanly".to_string(),
-        Some(s) => ended(s),
-        None => "could not be reaped".to_string(),
-    }
-}
-
-fn send_signal(child: &Child, sig: i32) {
-    if let Some(pid) = child.id() {
-        // SAFETY: signalling a child we spawned and have not reaped.
-        unsafe { libc::kill(pid as i32, sig) };
-    }
-}
-
-/// SIGTERM, wait up to `grace`, then SIGKILL. Returns the exit status.
+/// [`messages::child::stop`] awaiting tokio's `wait`: SIGTERM, wait up to `grace`, then SIGKILL.
+/// Returns the exit status.
 async fn stop(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
     if let Ok(Some(s)) = child.try_wait() {
         return Some(s);
     }
-    send_signal(child, libc::SIGTERM);
+    if let Some(pid) = child.id() {
+        messages::child::signal(pid, libc::SIGTERM);
+    }
     match tokio::time::timeout(grace, child.wait()).await {
         Ok(Ok(s)) => Some(s),
         _ => {
@@ -212,25 +152,23 @@ async fn stop(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
     }
 }
 
-/// Wait for a child to exit by itself for `grace`, then stop it.
+/// [`messages::child::await_or_stop`] awaiting tokio's `wait`: wait for a child to exit by itself
+/// for `grace`, then stop it.
 async fn await_or_stop(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
     match tokio::time::timeout(grace, child.wait()).await {
         Ok(Ok(s)) => Some(s),
-        _ => stop(child, Duration::from_secs(3)).await,
+        _ => stop(child, messages::child::GRACE).await,
     }
 }
 
 fn spawn(cmd: &mut Command, what: &str, bin: &Path) -> anyhow::Result<Child> {
     // Own process group: a terminal Ctrl-C reaches rig only, which then stops the plant first so
     // the controller sees the plant's goodbye instead of dying at the same instant.
-    cmd.process_group(0).kill_on_drop(true).stdin(Stdio::null());
     // SIGTERM to the child when rig dies, even by SIGKILL (the plant then finalises its
     // recording). PDEATHSIG follows the spawning thread: rig's runtime is current-thread, so this
     // is the main thread, which lives as long as rig.
-    // SAFETY: the hook calls only prctl/getppid/getpid between fork and exec.
-    unsafe {
-        cmd.pre_exec(messages::host::die_with_parent());
-    }
+    messages::child::configure(cmd.as_std_mut(), SpawnOptions { own_process_group: true, die_with_parent: true });
+    cmd.kill_on_drop(true);
     cmd.spawn().with_context(|| format!("starting the {what} {}", bin.display()))
 }
 
@@ -412,19 +350,4 @@ async fn finish(
         e => e,
     };
     Ok(Outcome { ending, plant_summary })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use std::os::unix::process::ExitStatusExt;
-
-    #[test]
-    fn only_exit_status_0_is_clean_and_signals_are_named() {
-        assert_eq!(describe_stopped(Some(ExitStatus::from_raw(0))), "stopped cleanly");
-        let bus = describe_stopped(Some(ExitStatus::from_raw(libc::SIGBUS)));
-        assert!(bus.starts_with("was killed by signal 7 (SIGBUS") && !bus.contains("clean"), "{bus}");
-        let shm = describe_stopped(Some(ExitStatus::from_raw(messages::host::EXIT_SHARED_MEMORY << 8)));
-        assert_eq!(shm, "ended with exit status 71 (shared memory unusable, see its message above)");
-    }
 }

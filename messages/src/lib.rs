@@ -10,6 +10,7 @@
 //! IRB 2400 (thesis Table 7.1). Every record carries [`CONTRACT_VERSION`] in its first field; a
 //! peer with another version is refused (see [`check_version`]).
 
+pub mod child;
 pub mod host;
 pub mod liveness;
 #[cfg(feature = "logging")]

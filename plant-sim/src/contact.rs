@@ -28,10 +28,8 @@
 use nalgebra::{Matrix3, Vector3};
 use recordings::{StripRecord, MAX_CENTRELINE};
 use robot::Vec6;
-use scenario::Scenario;
+use scenario::{Scenario, STRIP_TOP_HEIGHT_M};
 use strip::{CbBoundary, StripModel, StripParams, Substrate};
-
-use crate::physics::STRIP_TOP_HEIGHT_M;
 
 /// z_a grid spacing of the wheel-direction table, m.
 pub const TABLE_STEP_M: f64 = 0.05e-3;

@@ -18,7 +18,7 @@ use std::sync::Arc;
 
 use crate::histogram::Histogram;
 use crate::rt;
-pub use recordings::attribution::HOST_STALL_NS;
+pub use recordings::HOST_STALL_NS;
 
 /// SCHED_FIFO priority of the probe threads: above the plant's loop (80) and the controller
 /// (80), so that what it measures is the host, not the rig; it runs for a few µs per period.

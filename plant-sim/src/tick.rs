@@ -16,7 +16,6 @@ use scenario::{Mode, Scenario};
 
 use crate::gate::{Decision, Gate, GateConfig};
 use crate::limits::ReflexLimits;
-use crate::loop_rt::StackText;
 use crate::physics::Physics;
 use crate::recording::{EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
 
@@ -349,5 +348,32 @@ const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics::zeroed(0);
 pub(crate) fn event(recorder: Option<&mut Recorder>, tick: u64, t: f64, kind: EventKind, text: &str) {
     if let Some(r) = recorder {
         r.record_event(&EventRecord::new(tick, t, kind, text));
+    }
+}
+
+/// A short text on the stack for the rare events' texts (no heap allocation); the tick and its
+/// drivers (real-time loop, EGM) write them.
+pub(crate) struct StackText {
+    buf: [u8; 192],
+    len: usize,
+}
+
+impl StackText {
+    pub(crate) fn new() -> Self {
+        StackText { buf: [0; 192], len: 0 }
+    }
+    pub(crate) fn as_str(&self) -> &str {
+        std::str::from_utf8(&self.buf[..self.len]).unwrap_or("")
+    }
+}
+
+impl std::fmt::Write for StackText {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        let n = s.len().min(self.buf.len() - self.len);
+        // Cut on a char boundary.
+        let n = (0..=n).rev().find(|&i| s.is_char_boundary(i)).unwrap_or(0);
+        self.buf[self.len..self.len + n].copy_from_slice(&s.as_bytes()[..n]);
+        self.len += n;
+        Ok(())
     }
 }

@@ -1,4 +1,6 @@
-//! Recording, reading, replaying and reporting rig runs as MCAP files (DESIGN section 8).
+//! Recording rig runs as MCAP files (DESIGN section 8): the record types, the schema and CDR
+//! encoder, the writer thread and the live view. This is what the plant links; reading a file
+//! back, the report, plots, compare, replay and the miss attribution live in `recording-tools`.
 //!
 //! The plant hands one fixed-size [`TickRecord`] per tick (and an [`EventRecord`] per event) to a
 //! [`Recorder`]: a wait-free push into a bounded single-producer queue; a writer thread encodes the
@@ -7,25 +9,14 @@
 //! draws (URDF, transforms, strip scene, log) in [`scene`]. Log time = the run's wall-clock start +
 //! simulated time; publish time = log time.
 //!
-//! - [`read::Recording`] reads a file back, checking every chunk's CRC (a cut or corrupt file up to
-//!   its first bad chunk, saying where and why).
-//! - [`report`] turns a recording into numbers and figures.
-//! - [`replay`] drives a controller open-loop from a recording and compares its torques.
-//! - [`cli`] holds the `rig replay` / `rig report` subcommands the `rig` binary wires in.
+//! [`synthetic`] writes a run known in closed form through the same [`Recorder`], for the
+//! writer's benchmark and the tools' tests.
 
-pub mod attribution;
 pub mod cdr;
-pub mod cli;
-pub mod compare;
 pub mod live;
-pub mod plots;
-pub mod read;
-pub mod replay;
-pub mod report;
 pub mod scene;
 pub mod schema;
 pub mod synthetic;
-pub mod tmpfs_test;
 mod writer;
 
 pub use live::{LiveConfig, LiveSummary};
@@ -48,6 +39,14 @@ pub const RECORDING_PROFILE: &str = "rig-weatherstrip";
 
 /// Format version of the files this crate writes (metadata `rig/recording_format`).
 pub const RECORDING_FORMAT_VERSION: u32 = 2;
+
+/// The 8 magic bytes every MCAP file starts (and a complete one ends) with.
+pub const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+
+/// A host-probe wake-up later than this is a host stall: what the plant's probe counts and
+/// time-stamps (`StageStamps::probe_late_ns`), and what the miss attribution of `rig timing` and
+/// `rig report` counts as the host's (the controller's wake share of the default 500 µs budget).
+pub const HOST_STALL_NS: u64 = 100_000;
 
 /// Everything recorded for one tick. Fixed size and `Copy`, so the plant fills it on the stack and
 /// the queue copies it without touching the heap.
@@ -381,6 +380,19 @@ impl Default for TickRecord {
             timing: TimingRecord::default(),
         }
     }
+}
+
+/// An error with its sources, `outer: inner: ...` (mcap's I/O error hides the OS error otherwise);
+/// the writer's and the live view's messages.
+pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut cur = e.source();
+    while let Some(c) = cur {
+        s.push_str(": ");
+        s.push_str(&c.to_string());
+        cur = c.source();
+    }
+    s
 }
 
 /// Simulated time of a tick in ns: added to the run's wall-clock start, the MCAP log (and publish)

@@ -13,6 +13,7 @@
 //! set-up, so they inherit its scheduling policy (normal) and CPU affinity (in lockstep: every CPU
 //! but the loop's), like the writer.
 
+use crate::error_chain;
 use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServer};
 use std::net::SocketAddr;
 use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
@@ -258,10 +259,6 @@ fn serve(addr: SocketAddr, name: &str, channels: Vec<(String, Schema, String)>, 
         let _ = tokio::time::timeout(Duration::from_secs(1), shutdown.wait()).await;
     });
     runtime.shutdown_timeout(Duration::from_secs(1));
-}
-
-fn error_chain(e: &dyn std::error::Error) -> String {
-    crate::writer::error_chain(e)
 }
 
 #[cfg(test)]

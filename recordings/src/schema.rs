@@ -459,7 +459,7 @@ pub struct StripRow {
     pub max_bottom_pressure_pa: f64,
     pub top_displacement_m: f64,
     /// Pa, by centre-line node (stored as f32: a 0.1 Pa resolution is ample against 100 kPa).
-    /// Their z: [`crate::read::Recording::centreline_z_m`].
+    /// Their z: `recording_tools::read::Recording::centreline_z_m`.
     pub centreline_pressure_pa: Vec<f32>,
 }
 

@@ -20,7 +20,7 @@
 
 use crate::live::{LiveChannel, LiveConfig, LiveError, LiveSummary, LiveView};
 use crate::schema::{self, TickHead, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
-use crate::{sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, MAX_CENTRELINE, RECORDING_FORMAT_VERSION};
+use crate::{error_chain, sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, MAX_CENTRELINE, RECORDING_FORMAT_VERSION};
 use mcap::records::{op, MessageHeader, Metadata};
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -995,7 +995,7 @@ impl WriterThread {
         });
         record(&mut out, op::DATA_END, &crc.to_le_bytes());
         record(&mut out, op::FOOTER, &[0u8; 20]);
-        out.extend_from_slice(crate::read::MCAP_MAGIC);
+        out.extend_from_slice(crate::MCAP_MAGIC);
         out
     }
 
@@ -1075,18 +1075,6 @@ fn free_bytes(path: &Path) -> Option<u64> {
         return None;
     }
     Some(s.f_bavail as u64 * s.f_frsize as u64)
-}
-
-/// An error with its sources, `outer: inner: ...` (mcap's I/O error hides the OS error otherwise).
-pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
-    let mut s = e.to_string();
-    let mut cur = e.source();
-    while let Some(c) = cur {
-        s.push_str(": ");
-        s.push_str(&c.to_string());
-        cur = c.source();
-    }
-    s
 }
 
 /// One Foxglove channel of a recording: where it is written and where the live view serves it.

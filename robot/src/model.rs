@@ -36,6 +36,14 @@ impl LinkInertia {
     }
 }
 
+impl BodyInertia {
+    /// The algorithms' form of a link's inertia (same frame, same numbers); written here so that
+    /// `spatial` needs nothing from the description.
+    fn local(link: &LinkInertia) -> Self {
+        BodyInertia { mass: link.mass_kg, com: link.com_m, inertia_com: link.inertia_com }
+    }
+}
+
 /// Precomputed constants of one DH row.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct DhConst {

@@ -5,8 +5,6 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::model::LinkInertia;
-
 pub(crate) type V3 = Vector3<f64>;
 pub(crate) type M3 = Matrix3<f64>;
 
@@ -16,12 +14,6 @@ pub(crate) struct BodyInertia {
     pub mass: f64,
     pub com: V3,
     pub inertia_com: M3,
-}
-
-impl BodyInertia {
-    pub fn local(link: &LinkInertia) -> Self {
-        BodyInertia { mass: link.mass_kg, com: link.com_m, inertia_com: link.inertia_com }
-    }
 }
 
 /// Symmetric 3x3 matrix by its six entries.

@@ -13,7 +13,7 @@ use std::path::Path;
 use toml::de::{DeTable, DeValue};
 use toml::Spanned;
 
-use crate::fields::{self, fmt_num, fmt_value, Field, Kind, Range};
+use crate::fields::{self, fmt_num, fmt_value, lookup, Field, Kind, Range};
 use crate::{Place, Scenario, ScenarioError, MAX_FORCE_POINTS};
 
 /// Where each field (and array element, `key[i]`) a file sets stands: its line and the byte
@@ -44,14 +44,6 @@ pub(crate) fn line_col(text: &str, pos: usize) -> (usize, usize) {
     let line = before.matches('\n').count() + 1;
     let column = before.rfind('\n').map_or(before.chars().count() + 1, |i| before[i + 1..].chars().count() + 1);
     (line, column)
-}
-
-/// The value at `key` (`section.field` or a top-level name) of a TOML table.
-pub(crate) fn lookup<'a>(doc: &'a toml::Table, key: &str) -> Option<&'a toml::Value> {
-    match key.split_once('.') {
-        Some((section, name)) => doc.get(section)?.as_table()?.get(name),
-        None => doc.get(key),
-    }
 }
 
 fn as_f64(v: &toml::Value) -> Option<f64> {

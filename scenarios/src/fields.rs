@@ -444,12 +444,20 @@ impl Field {
     }
 }
 
+/// The value at `key` (`section.field` or a top-level name, the keys of [`FIELDS`]) of a TOML table.
+pub(crate) fn lookup<'a>(doc: &'a toml::Table, key: &str) -> Option<&'a toml::Value> {
+    match key.split_once('.') {
+        Some((section, name)) => doc.get(section)?.as_table()?.get(name),
+        None => doc.get(key),
+    }
+}
+
 /// The README's field table (markdown), defaults from `Scenario::default()`.
 pub fn markdown_table() -> String {
     let defaults = toml::Table::try_from(Scenario::default()).expect("the default scenario serialises");
     let mut s = String::from("| field | type | unit | default | valid range | meaning |\n| --- | --- | --- | --- | --- | --- |\n");
     for f in FIELDS {
-        let default = crate::check::lookup(&defaults, f.key).map_or_else(|| "—".into(), fmt_value);
+        let default = lookup(&defaults, f.key).map_or_else(|| "—".into(), fmt_value);
         let unit = if f.unit.is_empty() { "—" } else { f.unit };
         s += &format!("| `{}` | {} | {unit} | `{default}` | {} | {} |\n", f.key, f.kind.text(), f.valid_text(), f.meaning);
     }

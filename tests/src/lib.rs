@@ -4,9 +4,10 @@
 //!
 //! The binaries must be built first: `cargo build --release --workspace --bins`.
 
+use messages::child::{self, SpawnOptions};
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, Command, ExitStatus};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -89,9 +90,10 @@ impl Daemon {
     pub fn start(name: &str, bin: &Path, args: &[&str], dir: &Path) -> Daemon {
         let stdout_path = dir.join(format!("{name}.stdout"));
         let stderr_path = dir.join(format!("{name}.stderr"));
-        let child = Command::new(bin)
+        // No PDEATHSIG: it follows the spawning thread, and a test's thread may end before the
+        // daemons it hands on; the Drop below ends them.
+        let child = child::configure(&mut Command::new(bin), SpawnOptions::default())
             .args(args)
-            .stdin(Stdio::null())
             .stdout(std::fs::File::create(&stdout_path).unwrap())
             .stderr(std::fs::File::create(&stderr_path).unwrap())
             .spawn()
@@ -106,24 +108,13 @@ impl Daemon {
     /// Send a signal (e.g. `libc::SIGKILL`).
     pub fn signal(&self, sig: i32) {
         if let Some(c) = &self.child {
-            // SAFETY: signalling our own child.
-            unsafe { libc::kill(c.id() as i32, sig) };
+            child::signal(c.id(), sig);
         }
     }
 
     /// Wait up to `timeout` for the process to exit.
     pub fn wait_timeout(&mut self, timeout: Duration) -> Option<ExitStatus> {
-        let child = self.child.as_mut()?;
-        let t0 = Instant::now();
-        loop {
-            if let Some(s) = child.try_wait().unwrap() {
-                return Some(s);
-            }
-            if t0.elapsed() > timeout {
-                return None;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        child::wait_deadline(self.child.as_mut()?, timeout).unwrap()
     }
 
     /// Wait for the exit or panic (after killing it) with the process's stderr.
@@ -156,10 +147,7 @@ fn read(p: &Path) -> String {
 impl Drop for Daemon {
     fn drop(&mut self) {
         if let Some(mut c) = self.child.take() {
-            if let Ok(None) = c.try_wait() {
-                let _ = c.kill();
-            }
-            let _ = c.wait();
+            child::kill(&mut c);
         }
     }
 }
@@ -282,7 +270,7 @@ pub fn python_rig(
 /// restarted controller's first command differs from the safe-stop torque by up to ~1000 N m on
 /// joint 2 here, as it pulls the sagged arm back to its start pose; applied at once, that is the
 /// jump this rules out.)
-pub fn assert_no_jump(rec: &recordings::read::Recording, takeover: u64) {
+pub fn assert_no_jump(rec: &recording_tools::read::Recording, takeover: u64) {
     let rows: Vec<_> = rec.joint_torque.iter().filter(|t| t.tick + 5 >= takeover && t.tick <= takeover + 100).collect();
     assert!(rows.len() > 50, "takeover at tick {takeover} too close to the end");
     for w in rows.windows(2) {
@@ -310,7 +298,7 @@ pub fn wall_ns() -> u64 {
 }
 
 /// The first tick the plant published at or after the wall-clock time `ns` (from `/timing`).
-pub fn tick_at_wall_ns(rec: &recordings::read::Recording, ns: u64) -> Option<u64> {
+pub fn tick_at_wall_ns(rec: &recording_tools::read::Recording, ns: u64) -> Option<u64> {
     rec.timing.iter().find(|t| t.timing.publish_wall_ns >= ns).map(|t| t.tick)
 }
 
@@ -320,7 +308,7 @@ pub fn tick_at_wall_ns(rec: &recordings::read::Recording, ns: u64) -> Option<u64
 /// pressures), as bits.
 /// Two recordings with the same digest agree bit for bit on all of them; wall clocks are left
 /// out, so a lockstep run's digest is the same on every machine and every day.
-pub fn physics_digest(rec: &recordings::read::Recording) -> String {
+pub fn physics_digest(rec: &recording_tools::read::Recording) -> String {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     let mut put = |x: u64| {
         for b in x.to_le_bytes() {

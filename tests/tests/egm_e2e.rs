@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use recordings::EventKind;
 use rig_tests::*;
 use robot::Vec6;
@@ -264,7 +264,7 @@ fn egm_thesis_run_in_lockstep_is_bit_identical_and_within_the_designs_bound() {
         assert_eq!(a.strip[k].bottom_force_n.to_bits(), b.strip[k].bottom_force_n.to_bits(), "bottom force differs at row {k}");
     }
     let s = scenario::Scenario::load(&sc).unwrap();
-    let roll = recordings::report::numbers(&a).rolling.expect("the wheel rolled");
+    let roll = recording_tools::report::numbers(&a).rolling.expect("the wheel rolled");
     let (max, rms) = (roll.force_error_max_abs_n.unwrap(), roll.force_error_rms_n.unwrap());
     assert!(roll.rolled_length_m > 0.0359, "rolled {} m", roll.rolled_length_m);
     let model = strip::StripModel::load_or_build(&plant_sim::contact::strip_params(&s)).unwrap();

@@ -2,16 +2,16 @@
 //! real `controller` in LOCKSTEP mode (deterministic), the thesis servo run read back from the
 //! MCAP recording. Build first: `cargo build --release --workspace --bins`.
 //!
-//! Metric (issue 6): over the rolling phase — the ticks whose position reference along the strip
-//! (controller diagnostics, task z) has left z_start and not yet reached z_end while the force
-//! law is active — the error | |bottom force| − |force reference| |.
+//! Metric (issue 6, `recording_tools::tracking`, what `rig run` prints): over the rolling phase —
+//! the ticks in contact whose position reference along the strip (controller diagnostics, task z)
+//! changed since the previous tick — the error |bottom force| − |force reference|.
 //!   default scenario (integral action): max ≤ 0.10 N, RMS ≤ 0.03 N
 //!   thesis scenario (no integral action): max ≤ 0.45 N (the thesis' Figure 6.7 result)
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use rig_tests::*;
 use scenario::Scenario;
 
@@ -19,23 +19,11 @@ fn scenario_file(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("scenarios").join(name)
 }
 
-/// Max and RMS tracking error over the rolling phase, and the number of rolling ticks.
-fn rolling_tracking(rec: &Recording, s: &Scenario) -> (f64, f64, usize) {
-    let (z0, z1) = (s.trajectory.z_start_mm * 1e-3, s.trajectory.z_end_mm * 1e-3);
-    let rows = rec.controller_by_tick();
-    let errors: Vec<f64> = rows
-        .iter()
-        .zip(&rec.strip)
-        .filter_map(|(c, strip)| {
-            let c = &rec.controller[(*c)?];
-            let z = c.pos_ref_task_m[2];
-            (c.force_control_active == 1 && z > z0 && z < z1).then(|| (strip.bottom_force_n.abs() - c.force_ref_n.abs()).abs())
-        })
-        .collect();
-    let n = errors.len();
-    let max = errors.iter().cloned().fold(0.0, f64::max);
-    let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n.max(1) as f64).sqrt();
-    (max, rms, n)
+/// Max and RMS tracking error over the rolling phase, and the number of rolling ticks: the
+/// numbers `rig report` and `rig run` print (`recording_tools::tracking`, one rule for all).
+fn rolling_tracking(rec: &Recording) -> (f64, f64, usize) {
+    let t = recording_tools::report::force_tracking(rec).expect("a rolling phase with force set-points");
+    (t.max_abs_n, t.rms_n, t.samples)
 }
 
 /// One lockstep servo run of `scenario`: plant + controller, recording read back.
@@ -68,9 +56,10 @@ fn default_scenario_with_integral_action_tracks_within_the_issue_bounds() {
     let s = Scenario::load(&path).unwrap();
     assert!(s.controller.force_integral, "the default scenario uses integral action");
     let rec = lockstep_servo_run("track-default", &path);
-    let (max, rms, n) = rolling_tracking(&rec, &s);
+    let (max, rms, n) = rolling_tracking(&rec);
     eprintln!("default (integral), lockstep: max {max:.4} N, RMS {rms:.4} N over {n} rolling ticks");
-    // The roll lasts roll_s at the control period (minus its two end ticks).
+    // The roll lasts roll_s at the control period: the reference moves on each of those ticks (the
+    // one that reaches z_end included), up to two fewer if the roll does not start on a tick.
     let expected = (s.trajectory.roll_s / s.loop_.period_s).round() as usize;
     assert!(n + 2 >= expected && n <= expected, "{n} rolling ticks, expected about {expected}");
     assert!(max <= 0.10, "max tracking error {max} N > 0.10 N");
@@ -104,8 +93,8 @@ fn halving_the_substep_changes_the_tracking_numbers_by_less_than_one_percent() {
     let fine = dir.join("substeps20.toml");
     std::fs::write(&fine, text.replace("\nsubsteps = 10\n", "\nsubsteps = 20\n")).unwrap();
     assert_eq!(Scenario::load(&fine).unwrap().loop_.substeps, 20);
-    let (m10, r10, _) = rolling_tracking(&lockstep_servo_run("sub10", &path), &s);
-    let (m20, r20, _) = rolling_tracking(&lockstep_servo_run("sub20", &fine), &s);
+    let (m10, r10, _) = rolling_tracking(&lockstep_servo_run("sub10", &path));
+    let (m20, r20, _) = rolling_tracking(&lockstep_servo_run("sub20", &fine));
     let (dm, dr) = ((m20 - m10).abs() / m20, (r20 - r10).abs() / r20);
     eprintln!("substeps 10 -> 20: max {m10:.5} -> {m20:.5} N ({:.3} %), RMS {r10:.5} -> {r20:.5} N ({:.3} %)", 100.0 * dm, 100.0 * dr);
     assert!(dm < 0.01 && dr < 0.01, "max changes {:.3} %, RMS {:.3} %", 100.0 * dm, 100.0 * dr);
@@ -117,7 +106,7 @@ fn thesis_controller_without_integral_action_stays_within_the_thesis_result() {
     let s = Scenario::load(&path).unwrap();
     assert!(!s.controller.force_integral);
     let rec = lockstep_servo_run("track-thesis", &path);
-    let (max, rms, n) = rolling_tracking(&rec, &s);
+    let (max, rms, n) = rolling_tracking(&rec);
     eprintln!("thesis (no integral), lockstep: max {max:.4} N, RMS {rms:.4} N over {n} rolling ticks");
     assert!(n > 0, "no rolling phase in the recording");
     assert!(max <= 0.45, "max tracking error {max} N > 0.45 N (thesis Figure 6.7)");
@@ -151,9 +140,8 @@ fn pressure_under_the_wheel(rec: &Recording, z_from: f64, z_to: f64) -> Vec<(f64
 /// is over it, and the force must still track, in `file`.
 fn bonds_the_whole_rolled_length(file: &str) {
     let path = scenario_file(file);
-    let s = Scenario::load(&path).unwrap();
     let rec = lockstep_servo_run(file.trim_end_matches(".toml"), &path);
-    let (max, rms, _) = rolling_tracking(&rec, &s);
+    let (max, rms, _) = rolling_tracking(&rec);
     assert!(max <= 0.10 && rms <= 0.03, "{file}: tracking max {max} N, RMS {rms} N");
     let under = pressure_under_the_wheel(&rec, 4e-3, 36e-3);
     assert!(under.len() >= 30, "only {} centre-line nodes between 4 and 36 mm", under.len());
@@ -161,7 +149,7 @@ fn bonds_the_whole_rolled_length(file: &str) {
     eprintln!("{file}: weakest centre-line pressure under the wheel {:.1} kPa at z = {:.1} mm", weakest.1 * 1e-3, weakest.0 * 1e3);
     assert!(weakest.1 >= 100e3, "{file}: z = {} mm saw only {} Pa under the wheel", weakest.0 * 1e3, weakest.1);
     // The report's share over the whole roll agrees.
-    let share = recordings::report::numbers(&rec).rolling.and_then(|r| r.bond_pressure_share).unwrap();
+    let share = recording_tools::report::numbers(&rec).rolling.and_then(|r| r.bond_pressure_share).unwrap();
     assert!(share >= 0.999, "{file}: report: {share}");
 }
 

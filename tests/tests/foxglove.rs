@@ -11,7 +11,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use rig_tests::*;
 
 fn pose_json(p: &Isometry3<f64>) -> serde_json::Value {

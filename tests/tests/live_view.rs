@@ -16,7 +16,7 @@ use std::process::Command;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use rig_tests::*;
 use serde_json::Value;
 

@@ -8,7 +8,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use messages::{PlantStatus, CONTRACT_VERSION};
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use recordings::EventKind;
 use rig_tests::*;
 

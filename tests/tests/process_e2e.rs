@@ -12,7 +12,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use messages::host::{EXIT_RIG_TAKEN, EXIT_SHARED_MEMORY};
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use recordings::EventKind;
 use rig_tests::*;
 

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::MutexGuard;
 use std::time::Duration;
 
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use recordings::EventKind;
 use rig_tests::*;
 use robot::Vec6;

@@ -6,8 +6,8 @@
 //! (ENOSPC) at tick N ..." or "disk almost full: 0 MiB free ...", and the file reads back
 //! complete, stopped early for that same reason, with every tick up to the stop. The inner test runs inside the namespace, started by the outer one.
 
-use recordings::read::{Integrity, Recording};
-use recordings::tmpfs_test::run_inner_on_private_tmpfs;
+use recording_tools::read::{Integrity, Recording};
+use recording_tools::tmpfs_test::run_inner_on_private_tmpfs;
 use rig_tests::{bin, plant_summary, start_controller, temp_dir, unique_rig, write_scenario, Daemon};
 use std::os::fd::AsRawFd;
 use std::path::{Path, PathBuf};

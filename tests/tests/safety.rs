@@ -16,7 +16,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use messages::{state_flags, PlantStatus};
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use recordings::EventKind;
 use rig_tests::*;
 use robot::params::{POSITION_LIMIT_RAD, TORQUE_LIMIT_NM, VELOCITY_LIMIT_RADPS};

@@ -6,7 +6,7 @@
 use std::path::Path;
 use std::time::Duration;
 
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use rig_tests::*;
 
 const LONG: Duration = Duration::from_secs(120);

@@ -12,7 +12,7 @@
 
 use std::time::Duration;
 
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use rig_tests::*;
 
 const EXPECTED: [(&str, &str); 3] = [

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
-use recordings::attribution::{attribute, Cause};
-use recordings::read::Recording;
+use recording_tools::attribution::{attribute, Cause};
+use recording_tools::read::Recording;
 use rig_tests::*;
 
 static SERIAL: Mutex<()> = Mutex::new(());
@@ -96,7 +96,7 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
         s.is_some_and(|s| {
             s.skipped_periods > 0
                 || s.budget_end_ns - s.plant_woke_ns < s.torque_budget_ns as i64
-                || woke_after_publish > (recordings::attribution::WAKE_SHARE * s.torque_budget_ns as f64) as i64
+                || woke_after_publish > (recording_tools::attribution::WAKE_SHARE * s.torque_budget_ns as f64) as i64
         })
     };
     let every_100th: Vec<u64> = (first + 1..=last).filter(|&k| k % 100 == 0).collect();

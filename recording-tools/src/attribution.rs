@@ -8,15 +8,14 @@
 //! iceoryx2) 70 %, the transport back 10 %.
 
 use crate::read::TimingRow;
-use crate::{ControllerStamps, StageStamps};
+use recordings::{ControllerStamps, StageStamps};
 
 /// Share of the budget for the controller's wake-up (publish → controller woke).
 pub const WAKE_SHARE: f64 = 0.2;
 /// Share of the budget for the controller's compute (woke → torque handed to iceoryx2).
 pub const COMPUTE_SHARE: f64 = 0.7;
-/// A probe wake-up later than this (the controller's wake share of the default 500 µs budget)
-/// is a host stall: what the probe counts and time-stamps.
-pub const HOST_STALL_NS: u64 = 100_000;
+/// A probe wake-up later than this is a host stall (defined with the record it is judged from).
+pub use recordings::HOST_STALL_NS;
 /// Stalls that count for a missed tick are those overlapping its deadline's period before (more
 /// before skipped periods) up to this many periods after its deadline (the budget and a late
 /// publish end before that), or up to the plant's finish if that was later.
@@ -407,7 +406,7 @@ pub fn format_table(a: &Attribution) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::TimingRecord;
+    use recordings::TimingRecord;
 
     const B: i64 = 500_000;
 

@@ -1,7 +1,11 @@
-//! The `rig replay` and `rig report` subcommands (the `rig` binary in `launch` wires them) and the
-//! numbers `rig run` prints at its end.
+//! The `rig replay`, `rig report` and `rig compare` subcommands (the `rig` binary in `launch` wires
+//! them) and the numbers `rig run` prints at its end. The arguments of `rig replay` live with the
+//! replay ([`ReplayArgs`]), the opening rule of every command with the reader ([`open_for`]).
 
+pub use crate::read::open_for;
 use crate::read::Recording;
+use crate::replay;
+pub use crate::replay::ReplayArgs;
 use crate::report::{self, ReportNumbers};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
@@ -48,51 +52,6 @@ pub fn compare(args: CompareArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `rig replay FILE [--speed X] [--controller PATH]`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct ReplayArgs {
-    /// The recording (.mcap).
-    pub file: PathBuf,
-    /// Republish at X times the recorded rate. Default: lockstep (wait for each torque, as fast as
-    /// the controller answers) when --controller is given, else the recorded rate (1).
-    #[arg(long)]
-    pub speed: Option<f64>,
-    /// Controller executable to drive open-loop from the recording and compare with the recorded
-    /// torques (it is started as `PATH --rig NAME --scenario FILE`; `--controller` alone or
-    /// `--controller auto` takes the `controller` next to this executable). Without it, replay only republishes; a controller
-    /// you start yourself on the printed rig name is compared too.
-    #[arg(long, num_args = 0..=1, default_missing_value = "auto")]
-    pub controller: Option<PathBuf>,
-    /// Scenario file for the controller (default: the scenario stored in the recording).
-    #[arg(long)]
-    pub scenario: Option<PathBuf>,
-    /// Rig name to publish on (default: a fresh `replay-<pid>`).
-    #[arg(long)]
-    pub rig: Option<String>,
-    /// Longest wait for one torque in lockstep, s.
-    #[arg(long, default_value_t = 2.0)]
-    pub watchdog: f64,
-    /// Also write the comparison as JSON to this file.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
-    /// Replay a cut (killed run) or corrupt file up to its first bad chunk instead of refusing it.
-    #[arg(long, visible_alias = "allow-damaged")]
-    pub allow_truncated: bool,
-}
-
-/// Opens a recording for a command: a cut or corrupt file is an error unless `allow_truncated`.
-pub fn open_for(path: &Path, allow_truncated: bool) -> anyhow::Result<Recording> {
-    let rec = Recording::open(path)?;
-    if let Some(e) = rec.damage_error() {
-        if !allow_truncated {
-            let flag = if matches!(e, crate::read::ReadError::Cut { .. }) { "--allow-truncated" } else { "--allow-damaged" };
-            return Err(anyhow::Error::new(e).context(format!("pass {flag} to use the intact ticks before the damage")));
-        }
-        tracing::warn!("{e}; using the intact ticks before it");
-    }
-    Ok(rec)
-}
-
 pub fn report(args: ReportArgs) -> anyhow::Result<()> {
     let rec = open_for(&args.file, args.allow_truncated)?;
     let out = args.out.clone().unwrap_or_else(|| default_report_dir(&args.file));
@@ -121,7 +80,7 @@ pub fn summary_numbers(path: &Path) -> anyhow::Result<ReportNumbers> {
 }
 
 pub fn replay(args: ReplayArgs) -> anyhow::Result<()> {
-    crate::replay::run(&args).map(|_| ())
+    replay::run(&args).map(|_| ())
 }
 
 #[cfg(test)]

@@ -8,15 +8,47 @@
 //! ticks are counted and left out. Everything else must match a deterministic controller exactly
 //! in lockstep.
 
-use crate::cli::{open_for, ReplayArgs};
-use crate::read::Recording;
+use crate::read::{open_for, Recording};
 use anyhow::{bail, Context};
+use messages::child::{self, SpawnOptions};
 use messages::ports::{PlantPorts, Wake};
 use messages::{PlantStatus, DOF};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
+
+/// `rig replay FILE [--speed X] [--controller PATH]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ReplayArgs {
+    /// The recording (.mcap).
+    pub file: PathBuf,
+    /// Republish at X times the recorded rate. Default: lockstep (wait for each torque, as fast as
+    /// the controller answers) when --controller is given, else the recorded rate (1).
+    #[arg(long)]
+    pub speed: Option<f64>,
+    /// Controller executable to drive open-loop from the recording and compare with the recorded
+    /// torques (it is started as `PATH --rig NAME --scenario FILE`; `--controller` alone or
+    /// `--controller auto` takes the `controller` next to this executable). Without it, replay only republishes; a controller
+    /// you start yourself on the printed rig name is compared too.
+    #[arg(long, num_args = 0..=1, default_missing_value = "auto")]
+    pub controller: Option<PathBuf>,
+    /// Scenario file for the controller (default: the scenario stored in the recording).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Rig name to publish on (default: a fresh `replay-<pid>`).
+    #[arg(long)]
+    pub rig: Option<String>,
+    /// Longest wait for one torque in lockstep, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub watchdog: f64,
+    /// Also write the comparison as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Replay a cut (killed run) or corrupt file up to its first bad chunk instead of refusing it.
+    #[arg(long, visible_alias = "allow-damaged")]
+    pub allow_truncated: bool,
+}
 
 /// How the replayed controller's torques differ from the recorded ones.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -121,42 +153,30 @@ pub struct ReplayOutcome {
     pub comparison: Option<TorqueComparison>,
 }
 
-/// Kills the spawned controller if replay ends early.
-struct ChildGuard(Option<Child>);
+/// The spawned controller, killed if replay ends early ([`messages::child::Guard`]).
+struct ChildGuard {
+    proc: child::Guard,
+}
 
 impl ChildGuard {
     fn check_alive(&mut self) -> anyhow::Result<()> {
-        if let Some(c) = self.0.as_mut() {
+        if let Some(c) = self.proc.0.as_mut() {
             if let Some(status) = c.try_wait()? {
-                self.0 = None;
-                bail!("the controller exited during the replay ({status}); see its log above");
+                self.proc.0 = None;
+                bail!("the controller {} during the replay; see its log above", child::ended(status));
             }
         }
         Ok(())
     }
 
-    /// Waits up to `grace` for a clean exit, then kills.
+    /// Waits up to `grace` for a clean exit, then stops it (SIGTERM, then SIGKILL).
     fn finish(&mut self, grace: Duration) {
-        if let Some(mut c) = self.0.take() {
-            let until = Instant::now() + grace;
-            while Instant::now() < until {
-                if let Ok(Some(_)) = c.try_wait() {
-                    return;
-                }
-                std::thread::sleep(Duration::from_millis(10));
+        if let Some(mut c) = self.proc.0.take() {
+            if let Ok(Some(_)) = child::wait_deadline(&mut c, grace) {
+                return;
             }
-            tracing::warn!("the controller did not exit after the replay's shutdown state; killing it");
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-impl Drop for ChildGuard {
-    fn drop(&mut self) {
-        if let Some(mut c) = self.0.take() {
-            let _ = c.kill();
-            let _ = c.wait();
+            tracing::warn!("the controller did not exit after the replay's shutdown state; stopping it");
+            child::stop(&mut c, child::GRACE);
         }
     }
 }
@@ -222,21 +242,18 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
     let _claim = messages::host::claim_plant(&rig, messages::host::prepare()?)?;
     let ports = PlantPorts::open(&rig, "replay").with_context(|| format!("opening the services of rig {rig:?}"))?;
     let mut blend = 0;
-    let mut child = ChildGuard(None);
+    let mut guard = ChildGuard { proc: child::Guard(None) };
     if let Some(path) = &args.controller {
         let exe = if path.as_os_str() == "auto" { default_controller()? } else { path.clone() };
         let scen = scenario_file(&rec, args.scenario.as_deref(), &tmp_dir)?;
         blend = blend_ticks(&scen, rec.period_s())?;
         let mut cmd = Command::new(&exe);
-        cmd.arg("--rig").arg(&rig).arg("--scenario").arg(&scen).stdin(Stdio::null());
+        cmd.arg("--rig").arg(&rig).arg("--scenario").arg(&scen);
         // The controller ends with the replay, even a replay killed by SIGKILL (spawned from the
         // main thread, which PDEATHSIG follows).
-        // SAFETY: the hook calls only prctl/getppid/getpid between fork and exec.
-        unsafe {
-            std::os::unix::process::CommandExt::pre_exec(&mut cmd, messages::host::die_with_parent());
-        }
+        child::configure(&mut cmd, SpawnOptions { own_process_group: false, die_with_parent: true });
         let c = cmd.spawn().with_context(|| format!("starting the controller {}", exe.display()))?;
-        child.0 = Some(c);
+        guard.proc.0 = Some(c);
         tracing::info!(rig = %rig, controller = %exe.display(), "replay: controller started");
     } else if let Some(s) = args.scenario.as_deref() {
         blend = blend_ticks(s, rec.period_s())?;
@@ -261,10 +278,10 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
         let mut wrench = rec.wrench[i];
         wrench.contract_version = messages::CONTRACT_VERSION;
         let tick = state.tick;
-        if i == 0 && child.0.is_some() {
+        if i == 0 && guard.proc.0.is_some() {
             // The started controller joins late and gets no history: republish the first tick
             // every 5 ms until it answers (as the plant does), then start the clock.
-            answers[0] = Some(handshake(&ports, &state, &wrench, &mut child, &rig)?);
+            answers[0] = Some(handshake(&ports, &state, &wrench, &mut guard, &rig)?);
             started = Instant::now();
             continue;
         }
@@ -277,7 +294,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
                     answers[i] = Some(t.tau);
                     break;
                 }
-                child.check_alive()?;
+                guard.check_alive()?;
                 if Instant::now() >= give_up {
                     tracing::warn!(tick, "no torque within the watchdog; continuing");
                     break;
@@ -299,7 +316,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
                 }
             }
             if i % 256 == 0 {
-                child.check_alive()?;
+                guard.check_alive()?;
             }
         }
     }
@@ -314,7 +331,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
     w.contract_version = messages::CONTRACT_VERSION;
     w.tick = last.tick;
     let _ = ports.publish(&last, &w);
-    child.finish(Duration::from_secs(2));
+    guard.finish(Duration::from_secs(2));
     let _ = std::fs::remove_dir_all(&tmp_dir);
 
     let comparison = answers.iter().any(Option::is_some).then(|| compare_torques(&rec, &answers, blend));
@@ -339,7 +356,7 @@ fn handshake(
     ports: &PlantPorts,
     state: &messages::JointState,
     wrench: &messages::Wrench,
-    child: &mut ChildGuard,
+    guard: &mut ChildGuard,
     rig: &str,
 ) -> anyhow::Result<[f64; DOF]> {
     let give_up = Instant::now() + Duration::from_secs(15);
@@ -354,7 +371,7 @@ fn handshake(
         if let Some(t) = ports.receive_torque_for(state.tick) {
             return Ok(t.tau);
         }
-        child.check_alive()?;
+        guard.check_alive()?;
         if Instant::now() >= give_up {
             bail!("the controller answered no state on rig {rig} within 15 s");
         }
@@ -391,12 +408,12 @@ pub fn format_outcome(o: &ReplayOutcome) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::schema::TorqueRow;
+    use recordings::schema::TorqueRow;
 
     fn recording(held: &[bool], ids: &[u64], status: &[u32]) -> Recording {
         let mut rec = Recording::default();
         for k in 0..held.len() {
-            let mut r = crate::TickRecord::default();
+            let mut r = recordings::TickRecord::default();
             r.state.tick = k as u64;
             r.state.plant_status = status[k];
             rec.joint_state.push(r.state);

@@ -4,7 +4,7 @@
 
 #![allow(dead_code)] // each test binary uses its own part
 
-use recordings::read::Recording;
+use recording_tools::read::Recording;
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
@@ -20,7 +20,7 @@ pub fn python_ready() -> bool {
 
 /// Runs check_recording.py on `file` with `extra` flags: exit code and its output.
 pub fn check(file: &Path, extra: &[&str]) -> (i32, String) {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("python/check_recording.py");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../recordings/python/check_recording.py");
     let out = Command::new("python3").arg(script).arg(file).args(extra).output().unwrap();
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     (out.status.code().unwrap_or(-1), text)

@@ -7,9 +7,9 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use recordings::read::{Integrity, Recording};
+use recording_tools::read::{Integrity, Recording};
+use recording_tools::tmpfs_test::run_inner_on_private_tmpfs;
 use recordings::synthetic::SyntheticRun;
-use recordings::tmpfs_test::run_inner_on_private_tmpfs;
 use recordings::{EventKind, Recorder, RecorderConfig, RecorderTuning, RecordingSummary};
 
 const DIR_ENV: &str = "RECORDINGS_FULL_DISK_DIR";

@@ -4,7 +4,7 @@
 //! boundary leaves no room for the footer (unlike ENOSPC, where disk_full.rs shows the file ended cleanly), so the file ends there and
 //! reads as cut, exactly at the chunk boundary. Own test binary: the limit applies to the process.
 
-use recordings::read::{Integrity, Recording};
+use recording_tools::read::{Integrity, Recording};
 use recordings::synthetic::SyntheticRun;
 use recordings::{Recorder, RecorderConfig};
 

@@ -7,17 +7,16 @@
 //! run), a complete file damaged in the middle, and a recording the plant ended early on purpose
 //! (disk full, write error). [`Recording::open_complete`] refuses the first two.
 
-use crate::schema::{self, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
-pub use crate::schema::{EventRow, StripRow, TimingRow, TorqueRow};
-use crate::EventKind;
 use mcap::records::{op, MessageHeader, Record};
 use messages::{ControllerDiagnostics, JointState, Wrench};
+use recordings::schema::{self, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
+pub use recordings::schema::{EventRow, StripRow, TimingRow, TorqueRow};
+use recordings::EventKind;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
-/// The 8 magic bytes every MCAP file starts (and a complete one ends) with.
-pub const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+pub use recordings::MCAP_MAGIC;
 
 /// Opcode and length in front of every MCAP record, bytes.
 const RECORD_HEAD: usize = 1 + 8;
@@ -43,7 +42,7 @@ pub enum ReadError {
     #[error("{path}: in a chunk that passed its CRC, {what}; the file was written by another writer or version")]
     Format { path: PathBuf, what: String },
     #[error("{path}: message {sequence} on {topic} does not decode: {cause}")]
-    Decode { path: PathBuf, topic: String, sequence: u32, cause: crate::cdr::CdrError },
+    Decode { path: PathBuf, topic: String, sequence: u32, cause: recordings::cdr::CdrError },
 }
 
 /// Where and why reading stopped early.
@@ -133,7 +132,7 @@ pub struct Recording {
     pub timing: Vec<TimingRow>,
     pub events: Vec<EventRow>,
     /// `/egm`, one row per EGM cycle (EGM runs only).
-    pub egm: Vec<crate::EgmRecord>,
+    pub egm: Vec<recordings::EgmRecord>,
     /// Log time (Unix ns: the run's wall-clock start + simulated time) of each `joint_state` row.
     pub log_time_ns: Vec<u64>,
     /// z of the centre-line nodes as the first `/strip` message carrying them has it, m.
@@ -554,10 +553,23 @@ impl Drop for Mapped {
     }
 }
 
+/// Opens a recording for a command: a cut or corrupt file is an error unless `allow_truncated`.
+pub fn open_for(path: &Path, allow_truncated: bool) -> anyhow::Result<Recording> {
+    let rec = Recording::open(path)?;
+    if let Some(e) = rec.damage_error() {
+        if !allow_truncated {
+            let flag = if matches!(e, ReadError::Cut { .. }) { "--allow-truncated" } else { "--allow-damaged" };
+            return Err(anyhow::Error::new(e).context(format!("pass {flag} to use the intact ticks before the damage")));
+        }
+        tracing::warn!("{e}; using the intact ticks before it");
+    }
+    Ok(rec)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::schema::TIMING;
+    use recordings::schema::TIMING;
 
     #[test]
     fn an_earlier_schema_is_one_whose_fields_start_ours() {

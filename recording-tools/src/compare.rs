@@ -4,8 +4,9 @@
 //! pressure under the wheel against the wheel position.
 
 use crate::plots::{self, LinePlot, Series};
-use crate::read::Recording;
-use crate::report::{self, interpolate, rolling_ticks, ReportNumbers, BOND_PRESSURE_PA};
+use crate::read::{open_for, Recording};
+use crate::report::{self, interpolate, ReportNumbers, BOND_PRESSURE_PA};
+use crate::tracking;
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 
@@ -76,7 +77,7 @@ pub fn compare(paths: &[PathBuf], out_dir: &Path, allow_truncated: bool) -> anyh
     anyhow::ensure!(paths.len() >= 2, "rig compare needs at least two recordings, got {}", paths.len());
     let recs: Vec<Recording> = paths
         .iter()
-        .map(|p| crate::cli::open_for(p, allow_truncated).with_context(|| format!("opening {}", p.display())))
+        .map(|p| open_for(p, allow_truncated).with_context(|| format!("opening {}", p.display())))
         .collect::<anyhow::Result<_>>()?;
     let names = column_names(paths);
     let numbers: Vec<ReportNumbers> = recs.iter().map(report::numbers).collect();
@@ -100,16 +101,13 @@ pub fn compare(paths: &[PathBuf], out_dir: &Path, allow_truncated: bool) -> anyh
         ..Default::default()
     };
     for (rec, name) in recs.iter().zip(&names) {
-        let roll = rolling_ticks(rec);
-        let ctrl = rec.controller_by_tick();
+        let ticks = report::tracking_ticks(rec);
+        let roll = tracking::rolling_ticks(&ticks);
         let z_nodes = rec.centreline_z_m();
         let z_mm = |i: usize| rec.strip[i].wheel_z_m * 1e3;
         error.series.push(Series {
             label: name.clone(),
-            points: roll
-                .iter()
-                .filter_map(|&i| ctrl[i].map(|c| (z_mm(i), rec.strip[i].bottom_force_n.abs() - rec.controller[c].force_ref_n.abs())))
-                .collect(),
+            points: roll.iter().filter_map(|&i| ticks[i].force_error_n().map(|e| (z_mm(i), e))).collect(),
         });
         pressure.series.push(Series {
             label: name.clone(),

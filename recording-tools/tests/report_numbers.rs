@@ -1,8 +1,8 @@
 //! `rig report` numbers on a synthetic recording whose contents are known in closed form
 //! (see `recordings::synthetic`).
 
-use recordings::read::Recording;
-use recordings::report::{self, BOND_PRESSURE_PA};
+use recording_tools::read::Recording;
+use recording_tools::report::{self, BOND_PRESSURE_PA};
 use recordings::synthetic::SyntheticRun;
 use recordings::RecorderConfig;
 

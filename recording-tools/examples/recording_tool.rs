@@ -7,15 +7,15 @@ use clap::Parser;
 #[command(name = "recording_tool")]
 enum Cmd {
     /// Numbers and figures of a recording.
-    Report(recordings::cli::ReportArgs),
+    Report(recording_tools::cli::ReportArgs),
     /// Republish a recording; drive a controller open-loop and compare its torques.
-    Replay(recordings::cli::ReplayArgs),
+    Replay(recording_tools::cli::ReplayArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     tracing_subscriber::fmt().with_writer(std::io::stderr).init();
     match Cmd::parse() {
-        Cmd::Report(a) => recordings::cli::report(a),
-        Cmd::Replay(a) => recordings::cli::replay(a),
+        Cmd::Report(a) => recording_tools::cli::report(a),
+        Cmd::Replay(a) => recording_tools::cli::replay(a),
     }
 }

@@ -6,8 +6,8 @@
 //! Needs the binaries in the target folder (`cargo build --release -p plant-sim -p rig-tests`);
 //! skips with a `SKIP:` line when they are missing.
 
-use recordings::cli::ReplayArgs;
-use recordings::read::{Integrity, Recording};
+use recording_tools::cli::ReplayArgs;
+use recording_tools::read::{Integrity, Recording};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -120,7 +120,7 @@ fn replay_into_the_same_controller_reproduces_its_torques_and_a_changed_one_show
     assert_eq!(rec.joint_state.len(), 300, "{ticks:?}");
     assert_eq!(rec.dropped(), 0);
     // The official Python reader finds the same 300 ticks on every channel (when installed).
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("python/check_recording.py");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../recordings/python/check_recording.py");
     match Command::new("python3").arg(&script).arg(&file).args(["--expect-ticks", "300"]).output() {
         Ok(o) if o.status.code() == Some(0) => {}
         Ok(o) if String::from_utf8_lossy(&o.stderr).contains("ModuleNotFoundError") => {
@@ -131,7 +131,7 @@ fn replay_into_the_same_controller_reproduces_its_torques_and_a_changed_one_show
     }
 
     let args = |controller: PathBuf| lockstep_replay(&file, controller, None);
-    let same = recordings::replay::run(&args(hold.clone())).unwrap();
+    let same = recording_tools::replay::run(&args(hold.clone())).unwrap();
     assert!(same.lockstep);
     let c = same.comparison.expect("the controller answered");
     assert_eq!(c.ticks_compared + c.ticks_blending + c.ticks_held + c.ticks_unanswered, 300);
@@ -143,7 +143,7 @@ fn replay_into_the_same_controller_reproduces_its_torques_and_a_changed_one_show
     let wrapper = tmp("offset-controller.sh");
     std::fs::write(&wrapper, format!("#!/bin/sh\nexec '{}' --offset-nm 0.5 \"$@\"\n", hold.display())).unwrap();
     std::process::Command::new("chmod").arg("+x").arg(&wrapper).status().unwrap();
-    let changed = recordings::replay::run(&args(wrapper)).unwrap();
+    let changed = recording_tools::replay::run(&args(wrapper)).unwrap();
     let c = changed.comparison.unwrap();
     assert!(!c.identical);
     assert!((c.max_abs_nm[0] - 0.5).abs() < 1e-9 && (c.rms_nm[0] - 0.5).abs() < 1e-9, "{c:?}");
@@ -190,7 +190,7 @@ fn replay_into_the_force_controller_reproduces_its_torques() {
     let file = record_lockstep(&plant, &controller, "force.mcap", 1.5);
     let rec = Recording::open_complete(&file).unwrap();
     rec.check_continuity().unwrap();
-    let out = recordings::replay::run(&lockstep_replay(&file, controller, Some(tmp("force-replay.json")))).unwrap();
+    let out = recording_tools::replay::run(&lockstep_replay(&file, controller, Some(tmp("force-replay.json")))).unwrap();
     let c = out.comparison.unwrap();
     assert_eq!(c.ticks_compared + c.ticks_blending + c.ticks_held + c.ticks_unanswered, rec.joint_state.len());
     assert!(c.ticks_compared >= 1000 && c.identical, "{c:?}");

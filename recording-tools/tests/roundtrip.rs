@@ -1,7 +1,7 @@
 //! Writer -> file -> reader, without daemons: every tick on every channel, truncated files,
 //! foreign files, a disk running low.
 
-use recordings::read::{Integrity, ReadError, Recording};
+use recording_tools::read::{Integrity, ReadError, Recording};
 use recordings::synthetic::SyntheticRun;
 use recordings::{EventKind, Recorder, RecorderConfig, RecorderTuning};
 use std::path::PathBuf;
@@ -177,16 +177,16 @@ fn commands_refuse_a_cut_file_unless_allowed_and_name_the_way_out() {
     let bytes = std::fs::read(&path).unwrap();
     let cut = tmp("cli-cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
-    let err = format!("{:#}", recordings::cli::open_for(&cut, false).unwrap_err());
+    let err = format!("{:#}", recording_tools::cli::open_for(&cut, false).unwrap_err());
     assert!(err.contains("truncated") && err.contains("--allow-truncated") && err.contains("cli-cut.mcap"), "{err}");
-    let rec = recordings::cli::open_for(&cut, true).unwrap();
+    let rec = recording_tools::cli::open_for(&cut, true).unwrap();
     assert!(!rec.joint_state.is_empty());
     // `rig run` still gets numbers from a killed run, flagged as truncated.
-    let n = recordings::cli::summary_numbers(&cut).unwrap();
+    let n = recording_tools::cli::summary_numbers(&cut).unwrap();
     assert!(n.integrity == "cut" && n.integrity_detail.is_some() && n.ticks == rec.joint_state.len(), "{n:?}");
     let junk = tmp("cli-junk.mcap");
     std::fs::write(&junk, b"PK\x03\x04 a zip file").unwrap();
-    let err = format!("{:#}", recordings::cli::summary_numbers(&junk).unwrap_err());
+    let err = format!("{:#}", recording_tools::cli::summary_numbers(&junk).unwrap_err());
     assert!(err.contains("not an MCAP recording"), "{err}");
 }
 

@@ -1,7 +1,7 @@
 //! `rig compare` on synthetic recordings whose numbers are known in closed form: each column
 //! carries its own run's numbers, the overlays are written, and bad input names the file.
 
-use recordings::compare::{column_names, compare};
+use recording_tools::compare::{column_names, compare};
 use recordings::synthetic::SyntheticRun;
 use recordings::RecorderConfig;
 use std::path::PathBuf;

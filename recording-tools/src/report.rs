@@ -8,9 +8,8 @@ use serde::Serialize;
 /// The bond needs at least this bottom pressure under the wheel (thesis Section 4.2, Appendix C).
 pub const BOND_PRESSURE_PA: f64 = 100e3;
 
-/// A wheel that moved less than this along the strip in one tick counts as standing still when
-/// the controller published no reference to tell (0.1 mm/s at 1 kHz).
-pub const ROLLING_MIN_STEP_M: f64 = 1e-7;
+pub use crate::tracking::ROLLING_MIN_STEP_M;
+use crate::tracking::{self, ForceTracking, TrackingTick};
 
 /// Nearest-rank percentiles of a sample, in the sample's unit.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -124,24 +123,37 @@ pub struct ReportNumbers {
     pub attribution: Option<crate::attribution::Attribution>,
 }
 
-/// Index i (into the tick rows) of every tick where the wheel rolls: in contact and moving along
-/// the strip since the previous tick. The controller's reference z decides when it published
-/// one for both ticks (no jitter); otherwise the wheel must move more than [`ROLLING_MIN_STEP_M`].
-pub fn rolling_ticks(rec: &Recording) -> Vec<usize> {
+/// Every tick row of a recording as the rolling-phase metric sees it ([`crate::tracking`]): the
+/// reference z and the set-point from the controller's diagnostics of the tick; an EGM run has no
+/// diagnostics (EGM carries no force reference back), its set-point is the scenario's constant
+/// `trajectory.force_ref_n` (none with a table).
+pub fn tracking_ticks(rec: &Recording) -> Vec<TrackingTick> {
     let ctrl = rec.controller_by_tick();
+    let egm_ref = if rec.controller.is_empty() { egm_force_ref(rec) } else { None };
     let n = rec.strip.len().min(rec.joint_state.len());
-    (1..n)
-        .filter(|&i| {
-            let in_contact = rec.joint_state[i].flags & messages::state_flags::IN_CONTACT != 0 || rec.strip[i].contact_force_n != 0.0;
-            if !in_contact {
-                return false;
-            }
-            match (ctrl[i - 1], ctrl[i]) {
-                (Some(a), Some(b)) => rec.controller[a].pos_ref_task_m[2] != rec.controller[b].pos_ref_task_m[2],
-                _ => (rec.strip[i].wheel_z_m - rec.strip[i - 1].wheel_z_m).abs() > ROLLING_MIN_STEP_M,
+    (0..n)
+        .map(|i| {
+            let c = ctrl[i].map(|k| &rec.controller[k]);
+            TrackingTick {
+                in_contact: rec.joint_state[i].flags & messages::state_flags::IN_CONTACT != 0 || rec.strip[i].contact_force_n != 0.0,
+                z_ref_m: c.map(|c| c.pos_ref_task_m[2]),
+                wheel_z_m: rec.strip[i].wheel_z_m,
+                force_ref_n: c.map(|c| c.force_ref_n).or(egm_ref),
+                bottom_force_n: rec.strip[i].bottom_force_n,
             }
         })
         .collect()
+}
+
+/// Index i (into the tick rows) of every tick where the wheel rolls ([`crate::tracking`]'s rule).
+pub fn rolling_ticks(rec: &Recording) -> Vec<usize> {
+    tracking::rolling_ticks(&tracking_ticks(rec))
+}
+
+/// The force tracking of a recording over its rolling phase (the figures `rig report`, `rig run`
+/// and `rig sweep` print); None without a rolling tick that has a set-point.
+pub fn force_tracking(rec: &Recording) -> Option<ForceTracking> {
+    tracking::rolling_force_tracking(&tracking_ticks(rec))
 }
 
 /// Linear interpolation of (z, p) samples at `z` (clamped to the ends). `z_nodes` ascending.
@@ -226,28 +238,12 @@ fn egm_force_ref(rec: &Recording) -> Option<f64> {
 }
 
 fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
-    let roll = rolling_ticks(rec);
+    let ticks = tracking_ticks(rec);
+    let roll = tracking::rolling_ticks(&ticks);
     if roll.is_empty() {
         return None;
     }
-    let ctrl = rec.controller_by_tick();
-    // An EGM run has no controller diagnostics (EGM carries no force reference back): its
-    // set-point is the scenario's constant `trajectory.force_ref_n` (none with a table).
-    let egm_ref = if rec.controller.is_empty() { egm_force_ref(rec) } else { None };
-    let errors: Vec<f64> = roll
-        .iter()
-        .filter_map(|&i| ctrl[i].map(|c| rec.controller[c].force_ref_n).or(egm_ref).map(|r| rec.strip[i].bottom_force_n.abs() - r.abs()))
-        .collect();
-    let n_err = errors.len() as f64;
-    let (max_abs, rms, mean) = if errors.is_empty() {
-        (None, None, None)
-    } else {
-        (
-            Some(errors.iter().fold(0.0f64, |m, e| m.max(e.abs()))),
-            Some((errors.iter().map(|e| e * e).sum::<f64>() / n_err).sqrt()),
-            Some(errors.iter().sum::<f64>() / n_err),
-        )
-    };
+    let force = tracking::force_tracking(&ticks, &roll);
     let z_nodes = rec.centreline_z_m();
     let mut rolled = 0.0;
     let mut pressed = 0.0;
@@ -275,9 +271,9 @@ fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
         z_from_m: rec.strip[roll[0] - 1].wheel_z_m,
         z_to_m: rec.strip[roll[roll.len() - 1]].wheel_z_m,
         rolled_length_m: rolled,
-        force_error_max_abs_n: max_abs,
-        force_error_rms_n: rms,
-        force_error_mean_n: mean,
+        force_error_max_abs_n: force.map(|f| f.max_abs_n),
+        force_error_rms_n: force.map(|f| f.rms_n),
+        force_error_mean_n: force.map(|f| f.mean_n),
         bond_pressure_share: (have_pressure && rolled > 0.0).then(|| pressed / rolled),
         bond_weakest_pa_at_z_m: weakest.filter(|_| have_pressure),
     })

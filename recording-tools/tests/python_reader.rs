@@ -7,7 +7,7 @@
 mod common;
 
 use common::{assert_same_as_python, check, python_read, python_ready};
-use recordings::read::{Integrity, ReadError, Recording};
+use recording_tools::read::{Integrity, ReadError, Recording};
 use recordings::synthetic::SyntheticRun;
 use recordings::RecorderConfig;
 use std::path::PathBuf;
@@ -102,13 +102,13 @@ fn a_flipped_byte_in_chunk_3_stops_both_readers_at_the_same_tick_and_is_called_c
         assert!(msg.contains(needle) || (needle == "fails its CRC" && msg.contains("does not decompress")), "{needle:?} missing: {msg}");
     }
     assert!(!msg.contains("truncated") && !msg.contains("killed"), "a complete file is not truncated: {msg}");
-    let numbers = recordings::report::numbers(&rec);
-    let report = recordings::report::format_text(&numbers);
+    let numbers = recording_tools::report::numbers(&rec);
+    let report = recording_tools::report::format_text(&numbers);
     assert!(report.contains("corrupt (damaged after it was written)") && !report.contains("truncated"), "{report}");
     let json = serde_json::to_value(&numbers).unwrap();
     assert_eq!((json["integrity"].as_str(), json["damage"]["chunk"].as_u64()), (Some("corrupt"), Some(3)), "{json}");
     assert_eq!(json["damage"]["first_tick_lost"].as_u64(), Some(n as u64));
-    let err = format!("{:#}", recordings::cli::open_for(&bad, false).unwrap_err());
+    let err = format!("{:#}", recording_tools::cli::open_for(&bad, false).unwrap_err());
     assert!(err.contains("--allow-damaged") && !err.contains("truncated"), "{err}");
 }
 

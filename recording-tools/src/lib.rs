@@ -1,0 +1,23 @@
+//! The offline tools for rig recordings, the ones `rig` fronts: reading a file back, the report,
+//! plots, compare, replay, the miss attribution and their CLI. The plant links none of this: it
+//! links `recordings` (record types, schema, encoder, writer, live view) only.
+//!
+//! - [`read::Recording`] reads a file back, checking every chunk's CRC (a cut or corrupt file up to
+//!   its first bad chunk, saying where and why).
+//! - [`report`] turns a recording into numbers and figures.
+//! - [`tracking`] is the rolling-phase force-tracking metric, one rule for every caller.
+//! - [`compare`] puts several recordings side by side.
+//! - [`replay`] drives a controller open-loop from a recording and compares its torques.
+//! - [`attribution`] says whose fault each missed tick of a real-time run is.
+//! - [`cli`] holds the `rig replay` / `rig report` / `rig compare` subcommands the `rig` binary
+//!   wires in.
+
+pub mod attribution;
+pub mod cli;
+pub mod compare;
+pub mod plots;
+pub mod read;
+pub mod replay;
+pub mod report;
+pub mod tmpfs_test;
+pub mod tracking;
