@@ -445,12 +445,12 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
     }
     plant_sim::rt::install_stop_signals();
     let cache_dir = strip::cache::cache_dir();
-    let models = sweep::SharedModels::new(&cache_dir);
+    let strips = sweep::SharedStrips::new(&cache_dir);
     let n_cases = planned.len();
     let done = sweep::run_cases(&planned, |n, (case_dir, path, label)| {
         let recording = case_dir.join("run.mcap");
         let rig = format!("sweep-case-{n:02}");
-        let summary = in_process::run(&rig, path, a.launch.duration, &recording, |s| models.physics(s));
+        let summary = in_process::run(&rig, path, a.launch.duration, &recording, |s| strips.physics(s));
         let (ending, summary) = match summary {
             Ok(v) if v["stopped_by_signal"].as_bool() == Some(true) => (Ending::Interrupted, Some(v)),
             Ok(v) => (Ending::Completed, Some(v)),

@@ -20,11 +20,20 @@
 
 use std::path::Path;
 
+use std::sync::Arc;
+
 use anyhow::Context;
 use robot::{Robot, Tool, Vec6};
 use scenario::{Integrator, Scenario};
 
 pub use scenario::STRIP_TOP_HEIGHT_M;
+
+use crate::contact::StripTables;
+
+/// The plant's integration substep of a scenario, s (`loop.period_s / loop.substeps`).
+pub fn substep_s(s: &Scenario) -> f64 {
+    s.loop_.period_s / s.loop_.substeps as f64
+}
 
 /// The tool the scenario describes (DESIGN section 3). Starts from [`Tool::default`] (a solid
 /// cylinder on the flange z axis) with its mass and inertia scaled to `robot.tool_mass_kg`, the
@@ -81,26 +90,36 @@ impl Physics {
     /// Build the plant of a scenario, at rest in the start pose (IK of [`start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
-        let model = if s.strip.enabled {
-            let params = crate::contact::strip_params(s);
-            Some(
-                strip::StripModel::load_or_build_in(cache_dir, &params)
-                    .with_context(|| format!("strip model (cache {})", cache_dir.display()))?,
-            )
+        let tables = if s.strip.enabled {
+            let params = crate::contact::strip_params(s).with_reference_bulge();
+            let model = strip::StripModel::load_or_build_in(cache_dir, &params)
+                .with_context(|| format!("strip model (cache {})", cache_dir.display()))?;
+            Some(Arc::new(StripTables::new(&model, substep_s(s))))
         } else {
             None
         };
-        Physics::with_strip_model(s, model.as_ref())
+        Physics::with_strip_tables(s, tables)
     }
 
-    /// [`Physics::new`] with the strip model given (`rig sweep` loads each model once for all
-    /// its cases). `model` must be the one of `contact::strip_params(s)`; None without the strip.
-    pub fn with_strip_model(s: &Scenario, model: Option<&strip::StripModel>) -> anyhow::Result<Physics> {
-        anyhow::ensure!(model.is_some() == s.strip.enabled, "a strip model is needed exactly when strip.enabled");
-        let contact = model.map(|model| {
-            let h = s.loop_.period_s / s.loop_.substeps as f64;
-            crate::contact::StripContact::new(model, crate::contact::ContactGeometry::from_scenario(s), h)
-        });
+    /// [`Physics::new`] with the strip's tables given (`rig sweep` builds them once for all its
+    /// cases). `tables` must be those of the scenario's strip at the reference bump
+    /// (`contact::strip_params(s).with_reference_bulge()`) and substep; this plant scales their
+    /// bump to the scenario's height. None without the strip.
+    pub fn with_strip_tables(s: &Scenario, tables: Option<Arc<StripTables>>) -> anyhow::Result<Physics> {
+        anyhow::ensure!(tables.is_some() == s.strip.enabled, "strip tables are needed exactly when strip.enabled");
+        let contact = match tables {
+            Some(tables) => {
+                let params = crate::contact::strip_params(s);
+                anyhow::ensure!(
+                    *tables.params() == params.with_reference_bulge() && tables.substep_s() == substep_s(s),
+                    "the strip tables are not the scenario's (its strip at the reference bump, substep {} s)",
+                    substep_s(s)
+                );
+                let geo = crate::contact::ContactGeometry::from_scenario(s);
+                Some(crate::contact::StripContact::with_tables(tables, geo, params.bulge_scale()))
+            }
+            None => None,
+        };
         let robot = plant_robot(s);
         let target = start_tcp_pose(s);
         let q = robot
