@@ -701,8 +701,19 @@ impl StripContact {
         // Top centre-line displacement (same z), for the decimated 3D scene.
         let n_tcl = self.tcl_bulge_m.len();
         let (e0, e1) = (&t.d_tcl[g * n_tcl..(g + 1) * n_tcl], &t.d_tcl[(g + 1) * n_tcl..(g + 2) * n_tcl]);
+        // Four rows per pass over x here too (each bit for bit its single dot).
+        let trow = |c: usize| &tables.ctcl[c * m2..(c + 1) * m2];
+        let mut c = 0;
+        while c + 4 <= n_tcl {
+            let y = dot4([trow(c), trow(c + 1), trow(c + 2), trow(c + 3)], x);
+            r.top_centreline_uy_m[c..c + 4].copy_from_slice(&y);
+            c += 4;
+        }
+        for c in c..n_tcl {
+            r.top_centreline_uy_m[c] = dot(trow(c), x);
+        }
         for c in 0..n_tcl {
-            let u = dot(&tables.ctcl[c * m2..(c + 1) * m2], x);
+            let u = r.top_centreline_uy_m[c];
             r.top_centreline_uy_m[c] = u + ((1.0 - s) * e0[c] + s * e1[c]) * f + self.tcl_bulge_m[c];
         }
         r.top_centreline_uy_m[n_tcl..n_cl].fill(0.0);

@@ -179,11 +179,11 @@ impl Physics {
     /// Joint accelerations at `(q, qd)` under the drive torque for the command `tau.0`, the
     /// external torque `tau.1` (contact) and the end stops, all evaluated at this stage's state.
     /// Inside the ranges and below the drives' knee this is `forward_dynamics(q, qd, τ + τ_ext)`
-    /// exactly (the limits add exact zeros).
+    /// exactly (the limits add exact zeros). `sc`: the joints' (sin, cos) at `q`.
     #[inline]
-    fn qdd(&self, q: &Vec6, qd: &Vec6, tau: &(Vec6, Vec6)) -> Vec6 {
+    fn qdd(&self, q: &Vec6, sc: &robot::SinCos, qd: &Vec6, tau: &(Vec6, Vec6)) -> Vec6 {
         let total = self.limits.drive_torque(&tau.0, qd) + tau.1 + self.limits.end_stop_torque(q, qd);
-        self.robot.forward_dynamics(q, qd, &total)
+        self.robot.forward_dynamics_sc(sc, qd, &total)
     }
 
     /// TCP speed |J q̇| (translation), m/s, at the current state (the reflex's input).
@@ -207,9 +207,11 @@ impl Physics {
         let h = self.dt_sub_s;
         for _ in 0..self.substeps {
             let (q, qd) = (self.q, self.qd);
+            // One (sin, cos) of q for the contact's frames and the first stage's dynamics.
+            let sc = robot::sin_cos(&q);
             let tau_ext = match self.contact.as_mut() {
                 Some(c) => {
-                    let frames = self.robot.frames(&q);
+                    let frames = self.robot.frames_from_sin_cos(&sc);
                     let p = self.robot.tcp_position(&frames);
                     let jac = self.robot.jacobian_point(&frames, &p);
                     let w = c.substep(&p, &frames.rot[6], &(jac * qd));
@@ -219,8 +221,8 @@ impl Physics {
             };
             let tau = &(*tau_cmd, tau_ext);
             (self.q, self.qd) = match self.integrator {
-                Integrator::Midpoint => self.midpoint(&q, &qd, tau, h),
-                Integrator::Rk4 => self.rk4(&q, &qd, tau, h),
+                Integrator::Midpoint => self.midpoint(&q, &sc, &qd, tau, h),
+                Integrator::Rk4 => self.rk4(&q, &sc, &qd, tau, h),
             };
             self.limits.limit_driven_speed(tau_cmd, &mut self.qd);
         }
@@ -229,28 +231,28 @@ impl Physics {
 
     /// One explicit-midpoint step of length h (second order).
     #[inline]
-    fn midpoint(&self, q: &Vec6, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
-        let k1a = self.qdd(q, qd, tau);
+    fn midpoint(&self, q: &Vec6, sc: &robot::SinCos, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
+        let k1a = self.qdd(q, sc, qd, tau);
         let qm = q + qd * (0.5 * h);
         let vm = qd + k1a * (0.5 * h);
-        let km = self.qdd(&qm, &vm, tau);
+        let km = self.qdd(&qm, &robot::sin_cos(&qm), &vm, tau);
         (q + vm * h, qd + km * h)
     }
 
     /// One classic RK4 step of length h (fourth order).
     #[inline]
-    fn rk4(&self, q: &Vec6, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
+    fn rk4(&self, q: &Vec6, sc: &robot::SinCos, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
         let k1v = qd;
-        let k1a = self.qdd(q, qd, tau);
+        let k1a = self.qdd(q, sc, qd, tau);
         let q2 = q + k1v * (0.5 * h);
         let v2 = qd + k1a * (0.5 * h);
-        let k2a = self.qdd(&q2, &v2, tau);
+        let k2a = self.qdd(&q2, &robot::sin_cos(&q2), &v2, tau);
         let q3 = q + v2 * (0.5 * h);
         let v3 = qd + k2a * (0.5 * h);
-        let k3a = self.qdd(&q3, &v3, tau);
+        let k3a = self.qdd(&q3, &robot::sin_cos(&q3), &v3, tau);
         let q4 = q + v3 * h;
         let v4 = qd + k3a * h;
-        let k4a = self.qdd(&q4, &v4, tau);
+        let k4a = self.qdd(&q4, &robot::sin_cos(&q4), &v4, tau);
         (q + (k1v + v2 * 2.0 + v3 * 2.0 + v4) * (h / 6.0), qd + (k1a + k2a * 2.0 + k3a * 2.0 + k4a) * (h / 6.0))
     }
 
