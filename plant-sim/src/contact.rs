@@ -877,8 +877,8 @@ mod tests {
                 gb[k] = g_re[k] * b_re[k] - g_im[k] * b_im[k];
                 gb[modes + k] = g_re[k] * b_im[k] + g_im[k] * b_re[k];
             }
-            for i in 0..n_top {
-                dw[i] = nz.iter().map(|&j| model.d[(i, j)] * w[j]).sum();
+            for (i, dwi) in dw.iter_mut().enumerate() {
+                *dwi = nz.iter().map(|&j| model.d[(i, j)] * w[j]).sum();
             }
             t.d_ww[g] = nz.iter().map(|&i| w[i] * dw[i]).sum();
             t.d_sum[g] = nz.iter().map(|&j| d_colsum[j] * w[j]).sum();
