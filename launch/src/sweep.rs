@@ -204,40 +204,42 @@ pub fn write_overridden(base_path: &Path, set: &[Axis], out: &Path) -> anyhow::R
     Ok(out.to_path_buf())
 }
 
-/// The strip models of a sweep's cases, each loaded (or built) once and shared by every case
-/// with the same strip parameters (a bump height, say, is not one of them).
-pub struct SharedModels {
+/// The strips of a sweep's cases: each strip model loaded (or built) once and its contact tables
+/// built once, shared (`Arc`) by every case with the same strip and substep. The bump's height is
+/// not part of it: a case scales the reference bump's offsets to its height
+/// (`strip::StripParams::bulge_scale`), exactly as its daemon run does.
+pub struct SharedStrips {
     cache_dir: PathBuf,
-    models: Mutex<Vec<(strip::StripParams, Arc<strip::StripModel>)>>,
+    tables: Mutex<Vec<(strip::StripParams, u64, Arc<plant_sim::contact::StripTables>)>>,
 }
 
-impl SharedModels {
-    pub fn new(cache_dir: &Path) -> SharedModels {
-        SharedModels { cache_dir: cache_dir.to_path_buf(), models: Mutex::new(Vec::new()) }
+impl SharedStrips {
+    pub fn new(cache_dir: &Path) -> SharedStrips {
+        SharedStrips { cache_dir: cache_dir.to_path_buf(), tables: Mutex::new(Vec::new()) }
     }
 
-    /// The plant's physics of `s`, its strip model shared. Cases with the same model wait for
-    /// the first to load it instead of loading it twice.
+    /// The plant's physics of `s`, its strip tables shared. Cases with the same strip wait for
+    /// the first to build them instead of building them twice.
     pub fn physics(&self, s: &scenario::Scenario) -> anyhow::Result<plant_sim::physics::Physics> {
         if !s.strip.enabled {
-            return plant_sim::physics::Physics::with_strip_model(s, None);
+            return plant_sim::physics::Physics::with_strip_tables(s, None);
         }
-        let params = plant_sim::contact::strip_params(s);
-        let model = {
-            let mut models = self.models.lock().unwrap_or_else(|e| e.into_inner());
-            match models.iter().find(|(p, _)| *p == params) {
-                Some((_, m)) => m.clone(),
+        let params = plant_sim::contact::strip_params(s).with_reference_bulge();
+        let h = plant_sim::physics::substep_s(s);
+        let tables = {
+            let mut all = self.tables.lock().unwrap_or_else(|e| e.into_inner());
+            match all.iter().find(|(p, hb, _)| *p == params && *hb == h.to_bits()) {
+                Some((_, _, t)) => t.clone(),
                 None => {
-                    let m = Arc::new(
-                        strip::StripModel::load_or_build_in(&self.cache_dir, &params)
-                            .with_context(|| format!("strip model (cache {})", self.cache_dir.display()))?,
-                    );
-                    models.push((params, m.clone()));
-                    m
+                    let model = strip::StripModel::load_or_build_in(&self.cache_dir, &params)
+                        .with_context(|| format!("strip model (cache {})", self.cache_dir.display()))?;
+                    let t = Arc::new(plant_sim::contact::StripTables::new(&model, h));
+                    all.push((params, h.to_bits(), t.clone()));
+                    t
                 }
             }
         };
-        plant_sim::physics::Physics::with_strip_model(s, Some(&model))
+        plant_sim::physics::Physics::with_strip_tables(s, Some(tables))
     }
 }
 

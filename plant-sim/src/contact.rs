@@ -24,6 +24,13 @@
 //! real: `[Re c, −Im c]` against the state `[Re x, Im x]`, so Re(c x) is one real dot product
 //! (8 independent partial sums in a fixed order: vectorized, and still bit-reproducible).
 //! Nothing allocates after construction.
+//!
+//! Sharing: the tables depend on the strip model and the substep only ([`StripTables`]), the
+//! bump's terms on its height only linearly, so a contact holds an `Arc` of the tables and the
+//! bump terms scaled to its height (`StripParams::bulge_scale` of the model at
+//! `StripParams::BULGE_REFERENCE_M`). A sweep over bump heights builds one table for all cases.
+
+use std::sync::Arc;
 
 use nalgebra::{Matrix3, Vector3};
 use recordings::{StripRecord, MAX_CENTRELINE};
@@ -86,6 +93,7 @@ impl ContactGeometry {
 /// Wheel-direction quantities tabulated over z_a (see the module docs), flattened grid-major.
 /// A "real row" of a complex vector v over the modes is `[Re v, Im v]` (2 × modes values); a
 /// row multiplied with a state real row as `[Re c, −Im c] · [Re x, Im x]` gives Re(c x).
+#[derive(Debug)]
 struct WheelTable {
     z0_m: f64,
     n: usize,
@@ -98,7 +106,7 @@ struct WheelTable {
     /// (1−s)² p(g) + s(1−s) x(g) + s² p(g+1) exactly (bilinear in the interpolated rows).
     cgb_point: Vec<f64>,
     cgb_cross: Vec<f64>,
-    /// wᵀ D_top w, Σ_bottom D w, wᵀ u_bulge per grid point.
+    /// wᵀ D_top w, Σ_bottom D w, wᵀ u_bulge (the model's bump) per grid point.
     d_ww: Vec<f64>,
     d_sum: Vec<f64>,
     bulge_w: Vec<f64>,
@@ -185,16 +193,34 @@ fn dot_portable(a: &[f64], b: &[f64]) -> f64 {
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
 }
 
+/// Grid points per block of the table build: a column of D and a row of the modal B and C are
+/// read once for the whole block while its accumulators stay in cache.
+const BUILD_BLOCK: usize = 16;
+
+/// The table rows of the grid points `g0..g1` (`WheelTable::build`).
+struct TableBlock {
+    g0: usize,
+    gb: Vec<f64>,
+    c: Vec<f64>,
+    d_ww: Vec<f64>,
+    d_sum: Vec<f64>,
+    bulge_w: Vec<f64>,
+    d_cl: Vec<f64>,
+    d_tcl: Vec<f64>,
+}
+
 impl WheelTable {
     /// Table for `model` with the substep's ZOH factors γ = (e^{λh} − 1)/λ per mode.
+    ///
+    /// Every entry is the plain formula's, bit for bit (the test `fast_table_build_is_the_plain_one_bit_for_bit`
+    /// keeps the plain loops): each sum runs over the same terms in the same order from the same
+    /// start. Only the loop nest differs: by blocks of grid points, each column of D read once per
+    /// block (contiguous) instead of once per row and grid point, and the blocks spread over the
+    /// cores. That is most of a run's start-up (about 10⁹ multiply-adds for the 1 mm strip).
     fn build(model: &StripModel, cl_rows: &[usize], tcl_rows: &[usize], g_re: &[f64], g_im: &[f64]) -> WheelTable {
-        let mf = &model.modal;
-        let modes = mf.modes();
-        let n_top = model.n_top();
-        let n_bottom = model.n_bottom();
+        let modes = model.modal.modes();
         let n_cl = cl_rows.len();
-        let length = model.params.length_m;
-        let n = (length / TABLE_STEP_M).round() as usize + 1;
+        let n = (model.params.length_m / TABLE_STEP_M).round() as usize + 1;
         let row = 2 * modes;
         let mut t = WheelTable {
             z0_m: 0.0,
@@ -209,55 +235,130 @@ impl WheelTable {
             d_cl: vec![0.0; n * n_cl],
             d_tcl: vec![0.0; n * tcl_rows.len()],
         };
+        let n_top = model.n_top();
         // Column sums of D over the bottom rows (total bottom reaction per unit top force).
-        let d_colsum: Vec<f64> = (0..n_top).map(|j| (0..n_bottom).map(|r| model.d[(n_top + r, j)]).sum()).collect();
-        let mut w = vec![0.0; n_top];
-        let mut dw = vec![0.0; n_top];
-        let (mut b_re, mut b_im) = (vec![0.0; modes], vec![0.0; modes]);
-        for g in 0..n {
-            let z = t.z0_m + g as f64 * TABLE_STEP_M;
-            model.gaussian_weights(z, &mut w);
-            let wmax = w.iter().cloned().fold(0.0, f64::max);
-            let nz: Vec<usize> = (0..n_top).filter(|&j| w[j] > 1e-15 * wmax).collect();
-            b_re.fill(0.0);
-            b_im.fill(0.0);
-            let c = &mut t.c[g * row..(g + 1) * row];
-            for &j in &nz {
-                let wj = w[j];
+        let d_colsum: Vec<f64> = (0..n_top).map(|j| (0..model.n_bottom()).map(|r| model.d[(n_top + r, j)]).sum()).collect();
+        let starts: Vec<usize> = (0..n).step_by(BUILD_BLOCK).collect();
+        let threads = std::thread::available_parallelism().map_or(1, |c| c.get()).min(starts.len()).max(1);
+        let blocks: Vec<TableBlock> = std::thread::scope(|scope| {
+            let (starts, d_colsum, z0) = (&starts, &d_colsum, t.z0_m);
+            let workers: Vec<_> = (0..threads)
+                .map(|w| {
+                    scope.spawn(move || {
+                        let mine = starts.iter().skip(w).step_by(threads);
+                        let blocks = mine.map(|&g0| {
+                            Self::build_block(model, cl_rows, tcl_rows, g_re, g_im, d_colsum, z0, g0..(g0 + BUILD_BLOCK).min(n))
+                        });
+                        blocks.collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            workers.into_iter().flat_map(|h| h.join().expect("wheel table thread panicked")).collect()
+        });
+        let n_tcl = tcl_rows.len();
+        for b in blocks {
+            let (g0, nb) = (b.g0, b.d_ww.len());
+            t.gb[g0 * row..(g0 + nb) * row].copy_from_slice(&b.gb);
+            t.c[g0 * row..(g0 + nb) * row].copy_from_slice(&b.c);
+            t.d_ww[g0..g0 + nb].copy_from_slice(&b.d_ww);
+            t.d_sum[g0..g0 + nb].copy_from_slice(&b.d_sum);
+            t.bulge_w[g0..g0 + nb].copy_from_slice(&b.bulge_w);
+            t.d_cl[g0 * n_cl..(g0 + nb) * n_cl].copy_from_slice(&b.d_cl);
+            t.d_tcl[g0 * n_tcl..(g0 + nb) * n_tcl].copy_from_slice(&b.d_tcl);
+        }
+        t.finish_compliance();
+        t
+    }
+
+    /// The compliance terms from the finished `c` and `gb` rows.
+    fn finish_compliance(&mut self) {
+        for g in 0..self.n {
+            self.cgb_point[g] = dot(self.c_row(g), self.gb_row(g));
+            if g + 1 < self.n {
+                self.cgb_cross[g] = dot(self.c_row(g), self.gb_row(g + 1)) + dot(self.c_row(g + 1), self.gb_row(g));
+            }
+        }
+    }
+
+    /// Rows `gs` of the table (see [`WheelTable::build`]). Per grid point g the plain formulas
+    /// are, over the top nodes j of non-negligible weight w_j (nz, ascending):
+    /// b = Σ_j B_j w_j, c = Σ_j C_j w_j (from 0), (D w)_i = Σ_j D_ij w_j for every top row i and
+    /// centre-line row, then wᵀ D w = Σ_{i ∈ nz} w_i (D w)_i, Σ_bottom D w and wᵀ u_bulge (the
+    /// sums from the neutral element `Iterator::sum` starts from).
+    #[allow(clippy::too_many_arguments)]
+    fn build_block(
+        model: &StripModel,
+        cl_rows: &[usize],
+        tcl_rows: &[usize],
+        g_re: &[f64],
+        g_im: &[f64],
+        d_colsum: &[f64],
+        z0_m: f64,
+        gs: std::ops::Range<usize>,
+    ) -> TableBlock {
+        let mf = &model.modal;
+        let modes = mf.modes();
+        let n_top = model.n_top();
+        let (n_cl, n_tcl, row) = (cl_rows.len(), tcl_rows.len(), 2 * modes);
+        let nb = gs.len();
+        // Weights and their support per grid point of the block.
+        let mut w = vec![0.0; nb * n_top];
+        let mut nz: Vec<Vec<usize>> = Vec::with_capacity(nb);
+        let mut live = vec![false; nb * n_top];
+        for (b, g) in gs.clone().enumerate() {
+            let z = z0_m + g as f64 * TABLE_STEP_M;
+            let wb = &mut w[b * n_top..(b + 1) * n_top];
+            model.gaussian_weights(z, wb);
+            let wmax = wb.iter().cloned().fold(0.0, f64::max);
+            let support: Vec<usize> = (0..n_top).filter(|&j| wb[j] > 1e-15 * wmax).collect();
+            support.iter().for_each(|&j| live[b * n_top + j] = true);
+            nz.push(support);
+        }
+        let zero: f64 = std::iter::empty::<f64>().sum();
+        let (mut b_re, mut b_im) = (vec![0.0; nb * modes], vec![0.0; nb * modes]);
+        let mut c = vec![0.0; nb * row];
+        let mut dw = vec![zero; nb * n_top];
+        let mut d_cl = vec![zero; nb * n_cl];
+        for j in 0..n_top {
+            let (bj, cj) = (&mf.b[j * modes..(j + 1) * modes], &mf.c[j * modes..(j + 1) * modes]);
+            let col = model.d.col_as_slice(j);
+            for b in (0..nb).filter(|&b| live[b * n_top + j]) {
+                let wj = w[b * n_top + j];
+                let (br, bi) = (&mut b_re[b * modes..(b + 1) * modes], &mut b_im[b * modes..(b + 1) * modes]);
+                let (cr, ci) = c[b * row..(b + 1) * row].split_at_mut(modes);
                 for k in 0..modes {
-                    let b = mf.b[j * modes + k];
-                    b_re[k] += b.re * wj;
-                    b_im[k] += b.im * wj;
-                    let cc = mf.c[j * modes + k];
-                    c[k] += cc.re * wj;
-                    c[modes + k] -= cc.im * wj;
+                    br[k] += bj[k].re * wj;
+                    bi[k] += bj[k].im * wj;
+                    cr[k] += cj[k].re * wj;
+                    ci[k] -= cj[k].im * wj;
+                }
+                for (acc, d) in dw[b * n_top..(b + 1) * n_top].iter_mut().zip(&col[..n_top]) {
+                    *acc += d * wj;
+                }
+                for (acc, &r) in d_cl[b * n_cl..(b + 1) * n_cl].iter_mut().zip(cl_rows) {
+                    *acc += col[r] * wj;
                 }
             }
-            let gb = &mut t.gb[g * row..(g + 1) * row];
+        }
+        let mut gb = vec![0.0; nb * row];
+        let (mut d_ww, mut d_sum, mut bulge_w) = (vec![0.0; nb], vec![0.0; nb], vec![0.0; nb]);
+        let mut d_tcl = vec![0.0; nb * n_tcl];
+        for b in 0..nb {
+            let (wb, dwb, s) = (&w[b * n_top..(b + 1) * n_top], &dw[b * n_top..(b + 1) * n_top], &nz[b]);
+            let gbb = &mut gb[b * row..(b + 1) * row];
+            let (br, bi) = (&b_re[b * modes..(b + 1) * modes], &b_im[b * modes..(b + 1) * modes]);
             for k in 0..modes {
-                gb[k] = g_re[k] * b_re[k] - g_im[k] * b_im[k];
-                gb[modes + k] = g_re[k] * b_im[k] + g_im[k] * b_re[k];
+                gbb[k] = g_re[k] * br[k] - g_im[k] * bi[k];
+                gbb[modes + k] = g_re[k] * bi[k] + g_im[k] * br[k];
             }
-            for (i, dw_i) in dw.iter_mut().enumerate().take(n_top) {
-                *dw_i = nz.iter().map(|&j| model.d[(i, j)] * w[j]).sum();
-            }
-            t.d_ww[g] = nz.iter().map(|&i| w[i] * dw[i]).sum();
-            t.d_sum[g] = nz.iter().map(|&j| d_colsum[j] * w[j]).sum();
-            t.bulge_w[g] = nz.iter().map(|&i| w[i] * model.bulge_top_uy_m[i]).sum();
-            for (c, &row) in cl_rows.iter().enumerate() {
-                t.d_cl[g * n_cl + c] = nz.iter().map(|&j| model.d[(row, j)] * w[j]).sum();
-            }
-            for (c, &row) in tcl_rows.iter().enumerate() {
-                t.d_tcl[g * tcl_rows.len() + c] = nz.iter().map(|&j| model.d[(row, j)] * w[j]).sum();
+            d_ww[b] = s.iter().map(|&i| wb[i] * dwb[i]).sum();
+            d_sum[b] = s.iter().map(|&j| d_colsum[j] * wb[j]).sum();
+            bulge_w[b] = s.iter().map(|&i| wb[i] * model.bulge_top_uy_m[i]).sum();
+            for (c, &r) in tcl_rows.iter().enumerate() {
+                d_tcl[b * n_tcl + c] = dwb[r];
             }
         }
-        for g in 0..n {
-            t.cgb_point[g] = dot(t.c_row(g), t.gb_row(g));
-            if g + 1 < n {
-                t.cgb_cross[g] = dot(t.c_row(g), t.gb_row(g + 1)) + dot(t.c_row(g + 1), t.gb_row(g));
-            }
-        }
-        t
+        TableBlock { g0: gs.start, gb, c, d_ww, d_sum, bulge_w, d_cl, d_tcl }
     }
 
     #[inline]
@@ -297,20 +398,23 @@ impl ContactWrench {
     }
 }
 
-/// The strip, its bulge and the unilateral wheel contact (see the module docs).
-pub struct StripContact {
-    geo: ContactGeometry,
+/// What the contact needs of a strip model and a substep, computed once: the wheel table (most of
+/// a run's start-up) and the modal rows of the recorded outputs. It holds the bump of the model
+/// it was built from; a contact scales that bump to its own height (the bump's offsets are linear
+/// in it), so every case of a sweep over bump heights shares one `Arc` of it.
+#[derive(Debug)]
+pub struct StripTables {
+    /// The model's parameters (its bump: the one the bump terms below hold).
+    params: StripParams,
     table: WheelTable,
     h_s: f64,
     modes: usize,
     /// e^{λh} per mode (re, im).
     z_re: Vec<f64>,
     z_im: Vec<f64>,
-    /// Modal state as a real row `[Re x, Im x]`.
-    x: Vec<f64>,
     /// Σ_bottom C V (weighted) as a real row `[Re, −Im]`: total bottom reaction from the state.
     csum: Vec<f64>,
-    /// Bottom output rows of the centre line, their z, tributary area and bulge reaction.
+    /// Bottom output rows of the centre line, their z, tributary area and bump reaction.
     cl_rows: Vec<usize>,
     cl_z_m: Vec<f64>,
     cl_area_m2: Vec<f64>,
@@ -319,21 +423,16 @@ pub struct StripContact {
     /// Output rows of C (weighted) for the centre line, real rows `[Re, −Im]`, [c * 2 modes ..].
     ccl: Vec<f64>,
     /// The same for the top nodes on the centre line (x = 0, by z; one per bottom centre-line
-    /// node when the mesh has them), with their static bulge displacement; empty otherwise.
+    /// node when the mesh has them), with their static bump displacement; empty otherwise.
     ctcl: Vec<f64>,
     tcl_bulge_m: Vec<f64>,
     /// Rest coordinates of every top-surface node (task frame, m), layer by layer, then by x.
     top_xyz_m: Vec<[f64; 3]>,
-    // Last substep's results.
-    z_a_m: f64,
-    delta_prev_m: f64,
-    force_y_n: f64,
-    wrench: ContactWrench,
 }
 
-impl StripContact {
-    /// Contact for `model` with substep `h_s` (s): strip at rest, no contact.
-    pub fn new(model: &StripModel, geo: ContactGeometry, h_s: f64) -> StripContact {
+impl StripTables {
+    /// Tables of `model` for substep `h_s` (s).
+    pub fn new(model: &StripModel, h_s: f64) -> StripTables {
         assert!(h_s > 0.0 && h_s.is_finite(), "substep must be positive, got {h_s}");
         let mf = &model.modal;
         let modes = mf.modes();
@@ -388,14 +487,13 @@ impl StripContact {
             }
         }
         let table = WheelTable::build(model, &cl_rows, &tcl, &g_re, &g_im);
-        StripContact {
-            geo,
+        StripTables {
+            params: model.params.clone(),
             table,
             h_s,
             modes,
             z_re,
             z_im,
-            x: vec![0.0; 2 * modes],
             csum,
             cl_z_m: cl.iter().map(|&(_, z, _)| z).collect(),
             cl_area_m2: cl.iter().map(|&(_, _, a)| a).collect(),
@@ -406,6 +504,58 @@ impl StripContact {
             ctcl,
             tcl_bulge_m: tcl.iter().map(|&j| model.bulge_top_uy_m[j]).collect(),
             top_xyz_m: model.top_xyz_m.clone(),
+        }
+    }
+
+    /// Parameters of the model the tables were built from (its bump is the one they hold).
+    pub fn params(&self) -> &StripParams {
+        &self.params
+    }
+
+    /// Substep length, s.
+    pub fn substep_s(&self) -> f64 {
+        self.h_s
+    }
+}
+
+/// The strip, its bulge and the unilateral wheel contact (see the module docs).
+pub struct StripContact {
+    geo: ContactGeometry,
+    tables: Arc<StripTables>,
+    /// The bump terms of this contact: the tables' scaled to its height (`bulge_scale`).
+    bulge_w: Vec<f64>,
+    cl_bulge_n: Vec<f64>,
+    bulge_sum_n: f64,
+    tcl_bulge_m: Vec<f64>,
+    /// Modal state as a real row `[Re x, Im x]`.
+    x: Vec<f64>,
+    // Last substep's results.
+    z_a_m: f64,
+    delta_prev_m: f64,
+    force_y_n: f64,
+    wrench: ContactWrench,
+}
+
+impl StripContact {
+    /// Contact for `model` with substep `h_s` (s), its bump as the model has it: strip at rest,
+    /// no contact.
+    pub fn new(model: &StripModel, geo: ContactGeometry, h_s: f64) -> StripContact {
+        StripContact::with_tables(Arc::new(StripTables::new(model, h_s)), geo, 1.0)
+    }
+
+    /// Contact on shared `tables` with their bump scaled by `bulge_scale` (the height over the
+    /// tables' model's height; exactly 1 keeps the model's bump bit for bit): strip at rest, no
+    /// contact.
+    pub fn with_tables(tables: Arc<StripTables>, geo: ContactGeometry, bulge_scale: f64) -> StripContact {
+        let scaled = |v: &[f64]| v.iter().map(|x| x * bulge_scale).collect::<Vec<f64>>();
+        StripContact {
+            geo,
+            bulge_w: scaled(&tables.table.bulge_w),
+            cl_bulge_n: scaled(&tables.cl_bulge_n),
+            bulge_sum_n: tables.bulge_sum_n * bulge_scale,
+            tcl_bulge_m: scaled(&tables.tcl_bulge_m),
+            x: vec![0.0; 2 * tables.modes],
+            tables,
             z_a_m: 0.0,
             delta_prev_m: f64::NEG_INFINITY,
             force_y_n: 0.0,
@@ -415,17 +565,17 @@ impl StripContact {
 
     /// Substep length, s.
     pub fn substep_s(&self) -> f64 {
-        self.h_s
+        self.tables.h_s
     }
 
     /// z of the centre-line bottom nodes (m), in the order of `StripRecord::centreline_pressure_pa`.
     pub fn centreline_z_m(&self) -> &[f64] {
-        &self.cl_z_m
+        &self.tables.cl_z_m
     }
 
     /// Rest coordinates of the top-surface nodes (task frame, m), for the recording's scene.
     pub fn top_xyz_m(&self) -> &[[f64; 3]] {
-        &self.top_xyz_m
+        &self.tables.top_xyz_m
     }
 
     /// Wheel's lowest point (base) and the direction to it from the wheel centre, for a TCP (the
@@ -444,7 +594,7 @@ impl StripContact {
     /// position, tool orientation and TCP twist (v, ω), base frame), strip advanced by h. Returns
     /// the wrench on the tool to hold over the substep.
     pub fn substep(&mut self, tcp_pos_base: &Vector3<f64>, rot_base_tool: &Matrix3<f64>, twist_base: &Vec6) -> ContactWrench {
-        let h = self.h_s;
+        let h = self.tables.h_s;
         let (p_low, d) = self.lowest_point(tcp_pos_base, rot_base_tool);
         let v = Vector3::new(twist_base[0], twist_base[1], twist_base[2]);
         let w = Vector3::new(twist_base[3], twist_base[4], twist_base[5]);
@@ -453,20 +603,20 @@ impl StripContact {
         self.z_a_m = p_low.x - self.geo.strip_start_x_m;
         let y_wheel_end = (p_low.z - self.geo.table_z_m) + v_low.z * h;
 
-        let t = &self.table;
+        let t = &self.tables.table;
         let (g, s) = t.locate(self.z_a_m);
         let lerp = |a: &[f64]| (1.0 - s) * a[g] + s * a[g + 1];
         // Free strip state at the substep end, Z x, in place; the surface under the wheel is
         // linear in the interpolated row, so it interpolates the two grid rows' outputs.
-        let m = self.modes;
+        let m = self.tables.modes;
         let (x_re, x_im) = self.x.split_at_mut(m);
-        for (((xr, xi), zr), zi) in x_re.iter_mut().zip(x_im.iter_mut()).zip(&self.z_re).zip(&self.z_im) {
+        for (((xr, xi), zr), zi) in x_re.iter_mut().zip(x_im.iter_mut()).zip(&self.tables.z_re).zip(&self.tables.z_im) {
             (*xr, *xi) = (zr * *xr - zi * *xi, zr * *xi + zi * *xr);
         }
         let u_free = (1.0 - s) * dot(t.c_row(g), &self.x) + s * dot(t.c_row(g + 1), &self.x);
         // One-substep compliance under the wheel (the tabulated quadratic in s).
         let d_h = lerp(&t.d_ww) + (1.0 - s) * (1.0 - s) * t.cgb_point[g] + s * (1.0 - s) * t.cgb_cross[g] + s * s * t.cgb_point[g + 1];
-        let surface = STRIP_TOP_HEIGHT_M + lerp(&t.bulge_w) + u_free;
+        let surface = STRIP_TOP_HEIGHT_M + lerp(&self.bulge_w) + u_free;
         let delta0 = surface - y_wheel_end;
         let (k_c, c_c) = (self.geo.stiffness_n_per_m, self.geo.damping_ns_per_m);
         let delta_prev = if self.delta_prev_m.is_finite() { self.delta_prev_m } else { delta0 };
@@ -513,22 +663,23 @@ impl StripContact {
     /// Strip outputs at the current state (end of the last substep) for the recording:
     /// O(centre-line nodes × modes), once per tick.
     pub fn fill_record(&self, r: &mut StripRecord) {
-        let t = &self.table;
+        let tables = &*self.tables;
+        let t = &tables.table;
         let (g, s) = t.locate(self.z_a_m);
         let lerp = |a: &[f64]| (1.0 - s) * a[g] + s * a[g + 1];
-        let (m2, f, x) = (2 * self.modes, self.force_y_n, &self.x[..]);
+        let (m2, f, x) = (2 * tables.modes, self.force_y_n, &self.x[..]);
         // Top displacement under the wheel (dynamic + bulge), total bottom reaction.
-        let u_w = lerp(&t.d_ww) * f + lerp(&t.bulge_w) + ((1.0 - s) * dot(t.c_row(g), x) + s * dot(t.c_row(g + 1), x));
-        let reaction_sum = dot(&self.csum, x) + lerp(&t.d_sum) * f + self.bulge_sum_n;
+        let u_w = lerp(&t.d_ww) * f + lerp(&self.bulge_w) + ((1.0 - s) * dot(t.c_row(g), x) + s * dot(t.c_row(g + 1), x));
+        let reaction_sum = dot(&tables.csum, x) + lerp(&t.d_sum) * f + self.bulge_sum_n;
         r.wheel_z_m = self.z_a_m;
         r.contact_force_n = f;
         // Force of the strip on the substrate along +y (thesis sign: −10 N when pressing 10 N).
         r.bottom_force_n = -reaction_sum;
         r.top_displacement_m = u_w;
-        let n_cl = self.cl_rows.len();
+        let n_cl = tables.cl_rows.len();
         let (d0, d1) = (&t.d_cl[g * n_cl..(g + 1) * n_cl], &t.d_cl[(g + 1) * n_cl..(g + 2) * n_cl]);
         // Centre-line reactions from the state, four rows per pass over x.
-        let row = |c: usize| &self.ccl[c * m2..(c + 1) * m2];
+        let row = |c: usize| &tables.ccl[c * m2..(c + 1) * m2];
         let mut c = 0;
         while c + 4 <= n_cl {
             let y = dot4([row(c), row(c + 1), row(c + 2), row(c + 3)], x);
@@ -541,15 +692,26 @@ impl StripContact {
         let mut pmax = f64::NEG_INFINITY;
         for c in 0..n_cl {
             let reaction = r.centreline_pressure_pa[c] + ((1.0 - s) * d0[c] + s * d1[c]) * f + self.cl_bulge_n[c];
-            let p = reaction / self.cl_area_m2[c];
+            let p = reaction / tables.cl_area_m2[c];
             r.centreline_pressure_pa[c] = p;
             pmax = pmax.max(p);
         }
         // Top centre-line displacement (same z), for the decimated 3D scene.
         let n_tcl = self.tcl_bulge_m.len();
         let (e0, e1) = (&t.d_tcl[g * n_tcl..(g + 1) * n_tcl], &t.d_tcl[(g + 1) * n_tcl..(g + 2) * n_tcl]);
+        // Four rows per pass over x here too (each bit for bit its single dot).
+        let trow = |c: usize| &tables.ctcl[c * m2..(c + 1) * m2];
+        let mut c = 0;
+        while c + 4 <= n_tcl {
+            let y = dot4([trow(c), trow(c + 1), trow(c + 2), trow(c + 3)], x);
+            r.top_centreline_uy_m[c..c + 4].copy_from_slice(&y);
+            c += 4;
+        }
+        for c in c..n_tcl {
+            r.top_centreline_uy_m[c] = dot(trow(c), x);
+        }
         for c in 0..n_tcl {
-            let u = dot(&self.ctcl[c * m2..(c + 1) * m2], x);
+            let u = r.top_centreline_uy_m[c];
             r.top_centreline_uy_m[c] = u + ((1.0 - s) * e0[c] + s * e1[c]) * f + self.tcl_bulge_m[c];
         }
         r.top_centreline_uy_m[n_tcl..n_cl].fill(0.0);
@@ -660,6 +822,140 @@ mod tests {
         // The wrench on the tool: +p along base z, no moment about the wheel centre.
         let wr = c.wrench();
         assert!((wr.force_base_n.z - p).abs() < 1e-12 && wr.torque_base_nm.norm() < 1e-12 * p);
+    }
+
+    /// The table as the plain formulas give it, one grid point at a time (the build before its
+    /// loops were blocked; kept as the reference of the fast build).
+    fn plain_table(model: &StripModel, cl_rows: &[usize], tcl_rows: &[usize], g_re: &[f64], g_im: &[f64]) -> WheelTable {
+        let mf = &model.modal;
+        let modes = mf.modes();
+        let n_top = model.n_top();
+        let n_bottom = model.n_bottom();
+        let n_cl = cl_rows.len();
+        let n = (model.params.length_m / TABLE_STEP_M).round() as usize + 1;
+        let row = 2 * modes;
+        let mut t = WheelTable {
+            z0_m: 0.0,
+            n,
+            gb: vec![0.0; n * row],
+            c: vec![0.0; n * row],
+            cgb_point: vec![0.0; n],
+            cgb_cross: vec![0.0; n],
+            d_ww: vec![0.0; n],
+            d_sum: vec![0.0; n],
+            bulge_w: vec![0.0; n],
+            d_cl: vec![0.0; n * n_cl],
+            d_tcl: vec![0.0; n * tcl_rows.len()],
+        };
+        let d_colsum: Vec<f64> = (0..n_top).map(|j| (0..n_bottom).map(|r| model.d[(n_top + r, j)]).sum()).collect();
+        let mut w = vec![0.0; n_top];
+        let mut dw = vec![0.0; n_top];
+        let (mut b_re, mut b_im) = (vec![0.0; modes], vec![0.0; modes]);
+        for g in 0..n {
+            let z = t.z0_m + g as f64 * TABLE_STEP_M;
+            model.gaussian_weights(z, &mut w);
+            let wmax = w.iter().cloned().fold(0.0, f64::max);
+            let nz: Vec<usize> = (0..n_top).filter(|&j| w[j] > 1e-15 * wmax).collect();
+            b_re.fill(0.0);
+            b_im.fill(0.0);
+            let c = &mut t.c[g * row..(g + 1) * row];
+            for &j in &nz {
+                let wj = w[j];
+                for k in 0..modes {
+                    let b = mf.b[j * modes + k];
+                    b_re[k] += b.re * wj;
+                    b_im[k] += b.im * wj;
+                    let cc = mf.c[j * modes + k];
+                    c[k] += cc.re * wj;
+                    c[modes + k] -= cc.im * wj;
+                }
+            }
+            let gb = &mut t.gb[g * row..(g + 1) * row];
+            for k in 0..modes {
+                gb[k] = g_re[k] * b_re[k] - g_im[k] * b_im[k];
+                gb[modes + k] = g_re[k] * b_im[k] + g_im[k] * b_re[k];
+            }
+            for (i, dwi) in dw.iter_mut().enumerate() {
+                *dwi = nz.iter().map(|&j| model.d[(i, j)] * w[j]).sum();
+            }
+            t.d_ww[g] = nz.iter().map(|&i| w[i] * dw[i]).sum();
+            t.d_sum[g] = nz.iter().map(|&j| d_colsum[j] * w[j]).sum();
+            t.bulge_w[g] = nz.iter().map(|&i| w[i] * model.bulge_top_uy_m[i]).sum();
+            for (c, &row) in cl_rows.iter().enumerate() {
+                t.d_cl[g * n_cl + c] = nz.iter().map(|&j| model.d[(row, j)] * w[j]).sum();
+            }
+            for (c, &row) in tcl_rows.iter().enumerate() {
+                t.d_tcl[g * tcl_rows.len() + c] = nz.iter().map(|&j| model.d[(row, j)] * w[j]).sum();
+            }
+        }
+        t.finish_compliance();
+        t
+    }
+
+    /// Every number of a table, as bits (`{:?}` of an f64 prints it exactly, the sign of zero too).
+    fn table_bits(t: &WheelTable) -> Vec<u64> {
+        let v = [&t.gb, &t.c, &t.cgb_point, &t.cgb_cross, &t.d_ww, &t.d_sum, &t.bulge_w, &t.d_cl, &t.d_tcl];
+        v.iter().flat_map(|v| v.iter().map(|x| x.to_bits())).chain([t.n as u64, t.z0_m.to_bits()]).collect()
+    }
+
+    /// The blocked, multi-threaded table build gives the plain formulas' table bit for bit (the
+    /// physics digests of the tick-identity test rest on it), on a grid whose length is not a
+    /// multiple of the block.
+    #[test]
+    fn fast_table_build_is_the_plain_one_bit_for_bit() {
+        let model = coarse();
+        let tables = StripTables::new(&model, 1e-4);
+        assert_ne!(tables.table.n % BUILD_BLOCK, 0, "the last block is a short one");
+        let modes = model.modal.modes();
+        let (mut g_re, mut g_im) = (vec![0.0; modes], vec![0.0; modes]);
+        for k in 0..modes {
+            let (lr, li) = (model.modal.lam[k].re, model.modal.lam[k].im);
+            let (zr, zi) = (tables.z_re[k], tables.z_im[k]);
+            let den = lr * lr + li * li;
+            g_re[k] = ((zr - 1.0) * lr + zi * li) / den;
+            g_im[k] = (zi * lr - (zr - 1.0) * li) / den;
+        }
+        let mut tcl: Vec<usize> = (0..model.n_top()).filter(|&j| model.top_xyz_m[j][0].abs() < 1e-9).collect();
+        tcl.sort_by(|&a, &b| model.top_xyz_m[a][2].total_cmp(&model.top_xyz_m[b][2]));
+        assert_eq!(tcl.len(), tables.cl_rows.len(), "the coarse mesh has a top centre line");
+        let plain = plain_table(&model, &tables.cl_rows, &tcl, &g_re, &g_im);
+        assert!(table_bits(&tables.table) == table_bits(&plain), "fast and plain tables differ");
+        assert!(tables.table.d_ww.iter().all(|v| *v != 0.0) && tables.table.d_tcl.iter().any(|v| *v != 0.0), "a table of something");
+    }
+
+    /// Wheel history on a contact: press at 0.2 mm depth while rolling along, then the record.
+    fn roll(c: &mut StripContact) -> Vec<u64> {
+        let g = geo();
+        let mut out = Vec::new();
+        let mut r = StripRecord::default();
+        for i in 0..400 {
+            let z = 0.004 + 0.03e-3 * i as f64;
+            let (pos, rot) = tcp_at(&g, z, STRIP_TOP_HEIGHT_M - 0.2e-3);
+            c.substep(&pos, &rot, &Vec6::new(3e-3, 0.0, 0.0, 0.0, 0.0, 0.0));
+            c.fill_record(&mut r);
+            out.extend([c.contact_force_n(), r.bottom_force_n, r.top_displacement_m, r.max_bottom_pressure_pa].map(f64::to_bits));
+            out.extend(r.centreline_pressure_pa[..r.n_centreline as usize].iter().map(|p| p.to_bits()));
+        }
+        out
+    }
+
+    /// Contacts on one shared table (a sweep's cases) run bit for bit as contacts on tables of
+    /// their own (their daemon runs), at the reference bump and scaled to other heights; a scale
+    /// of 1 is the model's bump exactly, and the bump does change the run.
+    #[test]
+    fn contacts_on_shared_tables_run_as_contacts_built_alone() {
+        let model = coarse();
+        let shared = Arc::new(StripTables::new(&model, 1e-4));
+        let mut histories = Vec::new();
+        for scale in [1.0, 0.5, 1.85, 0.0] {
+            let mut on_shared = StripContact::with_tables(shared.clone(), geo(), scale);
+            let mut alone = StripContact::with_tables(Arc::new(StripTables::new(&model, 1e-4)), geo(), scale);
+            let h = roll(&mut on_shared);
+            assert!(h == roll(&mut alone), "scale {scale}: the shared table's contact differs");
+            histories.push(h);
+        }
+        assert!(histories[0] == roll(&mut StripContact::new(&model, geo(), 1e-4)), "scale 1 is the model's bump");
+        assert!(histories[1] != histories[0] && histories[3] != histories[0], "the bump's height changes the run");
     }
 
     /// The four-row dot product gives each row bit for bit what the single one does (the

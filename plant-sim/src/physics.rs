@@ -20,11 +20,20 @@
 
 use std::path::Path;
 
+use std::sync::Arc;
+
 use anyhow::Context;
 use robot::{Robot, Tool, Vec6};
 use scenario::{Integrator, Scenario};
 
 pub use scenario::STRIP_TOP_HEIGHT_M;
+
+use crate::contact::StripTables;
+
+/// The plant's integration substep of a scenario, s (`loop.period_s / loop.substeps`).
+pub fn substep_s(s: &Scenario) -> f64 {
+    s.loop_.period_s / s.loop_.substeps as f64
+}
 
 /// The tool the scenario describes (DESIGN section 3). Starts from [`Tool::default`] (a solid
 /// cylinder on the flange z axis) with its mass and inertia scaled to `robot.tool_mass_kg`, the
@@ -81,26 +90,36 @@ impl Physics {
     /// Build the plant of a scenario, at rest in the start pose (IK of [`start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
-        let model = if s.strip.enabled {
-            let params = crate::contact::strip_params(s);
-            Some(
-                strip::StripModel::load_or_build_in(cache_dir, &params)
-                    .with_context(|| format!("strip model (cache {})", cache_dir.display()))?,
-            )
+        let tables = if s.strip.enabled {
+            let params = crate::contact::strip_params(s).with_reference_bulge();
+            let model = strip::StripModel::load_or_build_in(cache_dir, &params)
+                .with_context(|| format!("strip model (cache {})", cache_dir.display()))?;
+            Some(Arc::new(StripTables::new(&model, substep_s(s))))
         } else {
             None
         };
-        Physics::with_strip_model(s, model.as_ref())
+        Physics::with_strip_tables(s, tables)
     }
 
-    /// [`Physics::new`] with the strip model given (`rig sweep` loads each model once for all
-    /// its cases). `model` must be the one of `contact::strip_params(s)`; None without the strip.
-    pub fn with_strip_model(s: &Scenario, model: Option<&strip::StripModel>) -> anyhow::Result<Physics> {
-        anyhow::ensure!(model.is_some() == s.strip.enabled, "a strip model is needed exactly when strip.enabled");
-        let contact = model.map(|model| {
-            let h = s.loop_.period_s / s.loop_.substeps as f64;
-            crate::contact::StripContact::new(model, crate::contact::ContactGeometry::from_scenario(s), h)
-        });
+    /// [`Physics::new`] with the strip's tables given (`rig sweep` builds them once for all its
+    /// cases). `tables` must be those of the scenario's strip at the reference bump
+    /// (`contact::strip_params(s).with_reference_bulge()`) and substep; this plant scales their
+    /// bump to the scenario's height. None without the strip.
+    pub fn with_strip_tables(s: &Scenario, tables: Option<Arc<StripTables>>) -> anyhow::Result<Physics> {
+        anyhow::ensure!(tables.is_some() == s.strip.enabled, "strip tables are needed exactly when strip.enabled");
+        let contact = match tables {
+            Some(tables) => {
+                let params = crate::contact::strip_params(s);
+                anyhow::ensure!(
+                    *tables.params() == params.with_reference_bulge() && tables.substep_s() == substep_s(s),
+                    "the strip tables are not the scenario's (its strip at the reference bump, substep {} s)",
+                    substep_s(s)
+                );
+                let geo = crate::contact::ContactGeometry::from_scenario(s);
+                Some(crate::contact::StripContact::with_tables(tables, geo, params.bulge_scale()))
+            }
+            None => None,
+        };
         let robot = plant_robot(s);
         let target = start_tcp_pose(s);
         let q = robot
@@ -160,11 +179,11 @@ impl Physics {
     /// Joint accelerations at `(q, qd)` under the drive torque for the command `tau.0`, the
     /// external torque `tau.1` (contact) and the end stops, all evaluated at this stage's state.
     /// Inside the ranges and below the drives' knee this is `forward_dynamics(q, qd, τ + τ_ext)`
-    /// exactly (the limits add exact zeros).
+    /// exactly (the limits add exact zeros). `sc`: the joints' (sin, cos) at `q`.
     #[inline]
-    fn qdd(&self, q: &Vec6, qd: &Vec6, tau: &(Vec6, Vec6)) -> Vec6 {
+    fn qdd(&self, q: &Vec6, sc: &robot::SinCos, qd: &Vec6, tau: &(Vec6, Vec6)) -> Vec6 {
         let total = self.limits.drive_torque(&tau.0, qd) + tau.1 + self.limits.end_stop_torque(q, qd);
-        self.robot.forward_dynamics(q, qd, &total)
+        self.robot.forward_dynamics_sc(sc, qd, &total)
     }
 
     /// TCP speed |J q̇| (translation), m/s, at the current state (the reflex's input).
@@ -188,9 +207,11 @@ impl Physics {
         let h = self.dt_sub_s;
         for _ in 0..self.substeps {
             let (q, qd) = (self.q, self.qd);
+            // One (sin, cos) of q for the contact's frames and the first stage's dynamics.
+            let sc = robot::sin_cos(&q);
             let tau_ext = match self.contact.as_mut() {
                 Some(c) => {
-                    let frames = self.robot.frames(&q);
+                    let frames = self.robot.frames_from_sin_cos(&sc);
                     let p = self.robot.tcp_position(&frames);
                     let jac = self.robot.jacobian_point(&frames, &p);
                     let w = c.substep(&p, &frames.rot[6], &(jac * qd));
@@ -200,8 +221,8 @@ impl Physics {
             };
             let tau = &(*tau_cmd, tau_ext);
             (self.q, self.qd) = match self.integrator {
-                Integrator::Midpoint => self.midpoint(&q, &qd, tau, h),
-                Integrator::Rk4 => self.rk4(&q, &qd, tau, h),
+                Integrator::Midpoint => self.midpoint(&q, &sc, &qd, tau, h),
+                Integrator::Rk4 => self.rk4(&q, &sc, &qd, tau, h),
             };
             self.limits.limit_driven_speed(tau_cmd, &mut self.qd);
         }
@@ -210,28 +231,28 @@ impl Physics {
 
     /// One explicit-midpoint step of length h (second order).
     #[inline]
-    fn midpoint(&self, q: &Vec6, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
-        let k1a = self.qdd(q, qd, tau);
+    fn midpoint(&self, q: &Vec6, sc: &robot::SinCos, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
+        let k1a = self.qdd(q, sc, qd, tau);
         let qm = q + qd * (0.5 * h);
         let vm = qd + k1a * (0.5 * h);
-        let km = self.qdd(&qm, &vm, tau);
+        let km = self.qdd(&qm, &robot::sin_cos(&qm), &vm, tau);
         (q + vm * h, qd + km * h)
     }
 
     /// One classic RK4 step of length h (fourth order).
     #[inline]
-    fn rk4(&self, q: &Vec6, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
+    fn rk4(&self, q: &Vec6, sc: &robot::SinCos, qd: &Vec6, tau: &(Vec6, Vec6), h: f64) -> (Vec6, Vec6) {
         let k1v = qd;
-        let k1a = self.qdd(q, qd, tau);
+        let k1a = self.qdd(q, sc, qd, tau);
         let q2 = q + k1v * (0.5 * h);
         let v2 = qd + k1a * (0.5 * h);
-        let k2a = self.qdd(&q2, &v2, tau);
+        let k2a = self.qdd(&q2, &robot::sin_cos(&q2), &v2, tau);
         let q3 = q + v2 * (0.5 * h);
         let v3 = qd + k2a * (0.5 * h);
-        let k3a = self.qdd(&q3, &v3, tau);
+        let k3a = self.qdd(&q3, &robot::sin_cos(&q3), &v3, tau);
         let q4 = q + v3 * h;
         let v4 = qd + k3a * h;
-        let k4a = self.qdd(&q4, &v4, tau);
+        let k4a = self.qdd(&q4, &robot::sin_cos(&q4), &v4, tau);
         (q + (k1v + v2 * 2.0 + v3 * 2.0 + v4) * (h / 6.0), qd + (k1a + k2a * 2.0 + k3a * 2.0 + k4a) * (h / 6.0))
     }
 

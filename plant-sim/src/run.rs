@@ -138,6 +138,18 @@ pub fn open_recorder(
     physics: &Physics,
     live: Option<recordings::LiveConfig>,
 ) -> anyhow::Result<Recorder> {
+    open_recorder_with(path, about, scenario, physics, live, recordings::RecorderTuning::default())
+}
+
+/// [`open_recorder`] with the writer's `tuning` (`rig sweep` compresses faster).
+pub fn open_recorder_with(
+    path: &Path,
+    about: &RecordingAbout,
+    scenario: &Scenario,
+    physics: &Physics,
+    live: Option<recordings::LiveConfig>,
+    tuning: recordings::RecorderTuning,
+) -> anyhow::Result<Recorder> {
     let l = &scenario.loop_;
     let mode = about.mode;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -173,7 +185,7 @@ pub fn open_recorder(
         scene: Some(scene_config(scenario, physics.contact())),
         period_s: l.period_s,
     };
-    Recorder::start(cfg).with_context(|| format!("starting the recorder on {}", path.display()))
+    Recorder::start_with(cfg, tuning).with_context(|| format!("starting the recorder on {}", path.display()))
 }
 
 /// Run the plant until the duration is reached or SIGINT/SIGTERM arrives.

@@ -3,7 +3,7 @@
 //! the links' own frames (`newton_euler.rs`), forward dynamics by CRBA + L D L^T Cholesky.
 
 use crate::model::Robot;
-use crate::newton_euler::sin_cos;
+use crate::newton_euler::{sin_cos, SinCos};
 use crate::{Mat6, Vec6};
 
 impl Robot {
@@ -51,7 +51,16 @@ impl Robot {
     /// solve. M is symmetric positive definite with condition number ~1e5-1e6 (the small wrist
     /// inertias); Cholesky is backward stable, so f64 keeps qdd to ~1e-10 relative (tested).
     pub fn forward_dynamics(&self, q: &Vec6, qd: &Vec6, tau: &Vec6) -> Vec6 {
-        let (m, bias) = self.mass_matrix_and_bias(q, qd);
+        self.forward_dynamics_sc(&sin_cos(q), qd, tau)
+    }
+
+    /// [`Robot::forward_dynamics`] at the q of `sc` ([`crate::sin_cos`]): the same numbers, for a
+    /// caller that already needed them (the plant takes the frames and the first stage's
+    /// dynamics at one q in each substep).
+    #[inline]
+    pub fn forward_dynamics_sc(&self, sc: &SinCos, qd: &Vec6, tau: &Vec6) -> Vec6 {
+        let m = self.crba_local(sc);
+        let bias = self.rnea_local(sc, qd, &Vec6::zeros(), Self::GRAVITY_MPS2) + self.viscous.component_mul(qd);
         cholesky_solve(m, tau - bias)
     }
 

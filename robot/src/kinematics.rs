@@ -41,8 +41,10 @@ impl Robot {
         self.frames_from_sin_cos(&sin_cos(q))
     }
 
+    /// [`Robot::frames`] from the joints' `(sin, cos)` ([`crate::sin_cos`]), for a caller that
+    /// evaluates several algorithms at one q (the same numbers as `frames(q)`).
     #[inline(always)]
-    pub(crate) fn frames_from_sin_cos(&self, sc: &SinCos) -> Frames {
+    pub fn frames_from_sin_cos(&self, sc: &SinCos) -> Frames {
         let mut rot = [M3::identity(); 7];
         let mut pos = [V3::zeros(); 7];
         for i in 0..6 {

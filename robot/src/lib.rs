@@ -18,6 +18,7 @@ pub mod urdf;
 pub use ik::IkError;
 pub use kinematics::Frames;
 pub use model::{LinkInertia, Robot};
+pub use newton_euler::{sin_cos, SinCos};
 pub use scenario::{scenario_ik_seed, scenario_tcp_pose};
 pub use tool::Tool;
 

@@ -8,10 +8,10 @@ use crate::spatial::{BodyInertia, OriginInertia, V3};
 use crate::{Mat6, Vec6};
 
 /// `(sin q_i, cos q_i)` of all joints, computed once per call and shared.
-pub(crate) type SinCos = [(f64, f64); 6];
+pub type SinCos = [(f64, f64); 6];
 
 #[inline(always)]
-pub(crate) fn sin_cos(q: &Vec6) -> SinCos {
+pub fn sin_cos(q: &Vec6) -> SinCos {
     let mut sc = [(0.0, 0.0); 6];
     for i in 0..6 {
         sc[i] = q[i].sin_cos();

@@ -45,9 +45,10 @@ pub fn cache_dir() -> PathBuf {
     home.join(".cache").join("rig").join("strip")
 }
 
-/// Cache file of a parameter set.
+/// Cache file of a parameter set: the file of its reference bump
+/// ([`StripParams::with_reference_bulge`]), which serves every height of that bump.
 pub fn cache_path(dir: &Path, p: &StripParams) -> PathBuf {
-    dir.join(format!("strip-{}.bin", p.cache_key()))
+    dir.join(format!("strip-{}.bin", p.with_reference_bulge().cache_key()))
 }
 
 fn push_mat(buf: &mut Vec<u8>, m: &Mat<f64>) {
@@ -65,9 +66,20 @@ fn push_c(buf: &mut Vec<u8>, v: &[c64]) {
     }
 }
 
-/// Writes `model` to `path` atomically (temporary file + rename).
+/// Writes `model` to `path` atomically (temporary file + rename). Only a model at the reference
+/// bump is cached (what [`load`] expects in the file [`cache_path`] names).
 pub fn save(model: &StripModel, path: &Path) -> Result<()> {
     let io = |e| StripError::Io { path: path.display().to_string(), cause: e };
+    if model.params != model.params.with_reference_bulge() {
+        return Err(StripError::Cache {
+            path: path.display().to_string(),
+            detail: format!(
+                "only the reference bump's model is cached (bump {} m, the model's {} m)",
+                StripParams::BULGE_REFERENCE_M,
+                model.params.bulge_amplitude_m
+            ),
+        });
+    }
     let h = Header {
         params_json: serde_json::to_string(&model.params).expect("params serialise"),
         info: model.info.clone(),
@@ -207,25 +219,28 @@ pub fn load(path: &Path, expect: &StripParams) -> Result<Option<StripModel>> {
 
 impl StripModel {
     /// Loads the model for `p` from the cache directory, or builds (with a progress display) and
-    /// stores it. A corrupt or stale cache file is rebuilt and overwritten.
+    /// stores it. A corrupt or stale cache file is rebuilt and overwritten. The cache holds the
+    /// reference bump's model (one file for every height of a bump shape), scaled to `p`'s height
+    /// ([`StripModel::with_bulge_of`]).
     pub fn load_or_build(p: &StripParams) -> Result<StripModel> {
         Self::load_or_build_in(&cache_dir(), p)
     }
 
     pub fn load_or_build_in(dir: &Path, p: &StripParams) -> Result<StripModel> {
         p.validate()?;
+        let reference = p.with_reference_bulge();
         let path = cache_path(dir, p);
-        match load(&path, p) {
-            Ok(Some(m)) => return Ok(m),
+        match load(&path, &reference) {
+            Ok(Some(m)) => return Ok(m.with_bulge_of(p)),
             Ok(None) => {}
             Err(e) => tracing::warn!(error = %e, "ignoring unusable strip model cache file"),
         }
         let model = {
             let _progress = crate::progress::Progress::start("building strip model");
-            StripModel::build(p)?
+            StripModel::build(&reference)?
         };
         save(&model, &path)?;
         tracing::info!(path = %path.display(), "strip model cached");
-        Ok(model)
+        Ok(model.with_bulge_of(p))
     }
 }

@@ -189,10 +189,13 @@ pub fn run(cmd: Command) -> anyhow::Result<()> {
                 let _progress = crate::progress::Progress::start("report");
                 crate::report::make_report(&p)?
             };
-            // the report built the model anyway: keep it in the cache
+            // the report built the model anyway: keep it in the cache (which holds the
+            // reference bump's model only; another height's is that one scaled)
             let path = crate::cache::cache_path(&crate::cache::cache_dir(), &p);
-            if let Err(e) = crate::cache::save(&m, &path) {
-                tracing::warn!(error = %e, "could not cache the model");
+            if m.params == p.with_reference_bulge() {
+                if let Err(e) = crate::cache::save(&m, &path) {
+                    tracing::warn!(error = %e, "could not cache the model");
+                }
             }
             print!("{}", r.table());
             if let Some(out) = json {

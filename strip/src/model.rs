@@ -124,11 +124,7 @@ impl StripModel {
         let (cb_modal, red, (bulge_top_uy_m, bulge_bottom_reaction_n, bulge_s)) = std::thread::scope(|s| -> Result<_> {
             let bulge = s.spawn(|| {
                 let t = Instant::now();
-                let q_r: Vec<f64> = sys.bottom_nodes.iter().map(|&n| p.bulge_height_m(sys.mesh.coords[n][2])).collect();
-                let q_f = cb.static_prescribed(&q_r, sys.n_free());
-                let top: Vec<f64> = sys.top_y_free.iter().map(|&f| q_f[f]).collect();
-                let mut bottom = vec![0.0; sys.bottom_nodes.len()];
-                sys.reactions(&q_f, Some(&q_r), &mut bottom);
+                let (top, bottom) = bulge_statics(&sys, &cb, &p.with_reference_bulge());
                 (top, bottom, t.elapsed().as_secs_f64())
             });
             crate::progress::stage("CB modal form");
@@ -173,7 +169,7 @@ impl StripModel {
             dc_residual_rel: red.dc_residual_rel,
         };
         let model = StripModel {
-            params: p.clone(),
+            params: p.with_reference_bulge(),
             a: red.a,
             b: red.b,
             c: red.c,
@@ -188,7 +184,18 @@ impl StripModel {
             modal,
             info,
         };
-        Ok((model, Artifacts { sys, cb, cb_modal }))
+        Ok((model.with_bulge_of(p), Artifacts { sys, cb, cb_modal }))
+    }
+
+    /// This model (built at the reference bump, `params == p.with_reference_bulge()`) with the
+    /// bump of `p`: the bump's static offsets scaled by [`StripParams::bulge_scale`]. They are
+    /// linear in the bump's height; everything else does not depend on it.
+    pub fn with_bulge_of(mut self, p: &StripParams) -> StripModel {
+        assert_eq!(self.params, p.with_reference_bulge(), "with_bulge_of: the model must be the reference bump's of the same strip");
+        let k = p.bulge_scale();
+        self.bulge_top_uy_m.iter_mut().chain(&mut self.bulge_bottom_reaction_n).for_each(|v| *v *= k);
+        self.params = p.clone();
+        self
     }
 
     pub fn order(&self) -> usize {
@@ -223,6 +230,18 @@ impl StripModel {
         let y = &self.d * &uu - &self.c * &x;
         (0..y.nrows()).map(|i| y[(i, 0)]).collect()
     }
+}
+
+/// Static offsets of the substrate bump of `p` on the full model (through the CB factor): top u_y
+/// (m) and bottom reactions (N), solved directly at `p`'s height. Linear in the height; the
+/// models solve it once, at [`StripParams::BULGE_REFERENCE_M`], and scale it.
+pub fn bulge_statics(sys: &FullSystem, cb: &CraigBampton, p: &StripParams) -> (Vec<f64>, Vec<f64>) {
+    let q_r: Vec<f64> = sys.bottom_nodes.iter().map(|&n| p.bulge_height_m(sys.mesh.coords[n][2])).collect();
+    let q_f = cb.static_prescribed(&q_r, sys.n_free());
+    let top: Vec<f64> = sys.top_y_free.iter().map(|&f| q_f[f]).collect();
+    let mut bottom = vec![0.0; sys.bottom_nodes.len()];
+    sys.reactions(&q_f, Some(&q_r), &mut bottom);
+    (top, bottom)
 }
 
 /// Gaussian weights (5.33)-(5.34) for top nodes at `top_xyz_m`; see [`StripModel::gaussian_weights`].

@@ -81,6 +81,24 @@ impl Default for StripParams {
 }
 
 impl StripParams {
+    /// Bump height (m) at which the bump's static offsets are solved on the full model. They are
+    /// linear in the height, so every other height scales them by [`StripParams::bulge_scale`]:
+    /// one solve (and one cached model) serves every height of a bump shape. It is the default
+    /// scenario's 0.2 mm, so that its model, and its runs, are exactly the solve at its height.
+    pub const BULGE_REFERENCE_M: f64 = 0.2e-3;
+
+    /// These parameters with the bump at [`StripParams::BULGE_REFERENCE_M`]: the model that is
+    /// built and cached for every height of this bump shape.
+    pub fn with_reference_bulge(&self) -> StripParams {
+        StripParams { bulge_amplitude_m: Self::BULGE_REFERENCE_M, ..self.clone() }
+    }
+
+    /// The factor from the reference bump's offsets to this bump's: height / reference height
+    /// (exactly 1 at the reference height, so its offsets are the solve's bit for bit).
+    pub fn bulge_scale(&self) -> f64 {
+        self.bulge_amplitude_m / Self::BULGE_REFERENCE_M
+    }
+
     /// Rejects values the pipeline cannot handle, naming the field.
     #[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > 0.0)` refuses NaN too; `x <= 0.0` would let it through
     pub fn validate(&self) -> Result<(), StripError> {

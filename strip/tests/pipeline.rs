@@ -169,7 +169,43 @@ fn cache_round_trip_and_key() {
     assert_eq!(m1.bulge_bottom_reaction_n, m2.bulge_bottom_reaction_n);
     let q = StripParams { bulge_amplitude_m: 0.3e-3, ..p.clone() };
     assert_ne!(p.cache_key(), q.cache_key());
+    // Another bump height shares the file (the reference bump's model) and scales its bump.
+    assert_eq!(strip::cache::cache_path(&dir, &p), strip::cache::cache_path(&dir, &q));
+    let m3 = StripModel::load_or_build_in(&dir, &q).unwrap();
+    assert_eq!((m3.params.clone(), &m3.a, &m3.modal.b), (q.clone(), &m1.a, &m1.modal.b));
+    let k = 0.3e-3 / StripParams::BULGE_REFERENCE_M;
+    assert!(m3.bulge_top_uy_m.iter().zip(&m1.bulge_top_uy_m).all(|(a, b)| a.to_bits() == (b * k).to_bits()));
+    let w = StripParams { bulge_width_m: 0.011, ..p.clone() };
+    assert_ne!(strip::cache::cache_path(&dir, &p), strip::cache::cache_path(&dir, &w), "another bump shape is another model");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The bump's offsets of a model are the reference bump's solve scaled to the height (they are
+/// linear in it). Against a direct solve at another height (0.37 mm, both signs) they agree to
+/// rounding: the two differ by the solve's rounding error at each right-hand side, which for a
+/// backward-stable Cholesky solve is about κ(K) ε relative (κ of the bonded 2 mm strip's
+/// stiffness about 1e5-1e6 with ν = 0.49, ε = 2.2e-16), so 1e-9 of the largest offset leaves
+/// room for an ill-conditioned mesh and still means < 0.2 pm of surface height for a 0.2 mm bump
+/// (far below what the contact resolves); measured: 2.5e-15 (top) and 9e-14 (reactions). The
+/// reference height itself is the solve, bit for bit.
+#[test]
+fn a_scaled_bump_is_the_direct_solve_at_that_height() {
+    let p = params_2mm();
+    let (model, art) = StripModel::build_detailed(&p).unwrap();
+    let (top_ref, bottom_ref) = strip::model::bulge_statics(&art.sys, &art.cb, &p.with_reference_bulge());
+    assert!(model.bulge_top_uy_m.iter().zip(&top_ref).all(|(a, b)| a.to_bits() == b.to_bits()));
+    assert!(model.bulge_bottom_reaction_n.iter().zip(&bottom_ref).all(|(a, b)| a.to_bits() == b.to_bits()));
+    for height in [0.37e-3, -0.37e-3] {
+        let q = StripParams { bulge_amplitude_m: height, ..p.clone() };
+        let scaled = model.clone().with_bulge_of(&q);
+        let (top, bottom) = strip::model::bulge_statics(&art.sys, &art.cb, &q);
+        for (what, a, b) in [("top u_y", &scaled.bulge_top_uy_m, &top), ("bottom reactions", &scaled.bulge_bottom_reaction_n, &bottom)] {
+            let peak = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let diff = a.iter().zip(b.iter()).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+            eprintln!("bump {height} m, {what}: scaled vs direct differ by {:.2e} of the peak {peak:.3e}", diff / peak);
+            assert!(peak > 0.0 && diff <= 1e-9 * peak, "bump {height} m, {what}: {diff} vs peak {peak}");
+        }
+    }
 }
 
 #[test]
