@@ -6,10 +6,11 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use scenario::{Mode, Scenario};
 
-use crate::loop_rt::{LoopParams, LoopStats, PlantLoop};
+use crate::loop_rt::{LoopParams, PlantLoop};
 use crate::physics::Physics;
 use crate::recording::{EventKind, EventRecord, Recorder, RecorderConfig};
 use crate::rt;
+use crate::stats::LoopStats;
 
 /// Nice value of the lockstep loop thread: CFS weight ~9.3x a nice-0 thread, so a CPU-bound job
 /// sharing the lockstep CPU takes ~10 % of it instead of ~50 % (measured with a concurrent rustc
@@ -309,7 +310,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         (stats, Some(es))
     } else {
         let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode);
-        let stats = PlantLoop {
+        let mut plant_loop = PlantLoop {
             ports: &ports,
             plant: &mut plant,
             recorder: recorder.as_mut(),
@@ -317,8 +318,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
             arbiter: &mut arbiter,
             watch: Some(&watch),
             probe: probe.as_ref().map(|p| &*p.latest),
-        }
-        .run();
+        };
+        let stats = match mode {
+            Mode::Realtime => plant_loop.run_realtime(),
+            Mode::Lockstep => plant_loop.run_lockstep(),
+        };
         (stats, None)
     };
     let probe = probe.map(crate::probe::Probe::finish);

@@ -16,9 +16,9 @@ use scenario::{Mode, Scenario};
 
 use crate::gate::{Decision, Gate, GateConfig};
 use crate::limits::ReflexLimits;
-use crate::loop_rt::StackText;
 use crate::physics::Physics;
 use crate::recording::{EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
+use crate::stack_text::StackText;
 
 /// What one [`PlantTick::advance`] applied and measured.
 #[derive(Debug, Clone, Copy)]

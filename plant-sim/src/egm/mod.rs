@@ -41,10 +41,11 @@ use robot::{Robot, Vec6};
 use scenario::{Mode, Scenario};
 
 use crate::limits::ReflexLimits;
-use crate::loop_rt::{LoopStats, StackText};
 use crate::physics::Physics;
 use crate::recording::{EgmRecord, EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
 use crate::rt;
+use crate::stack_text::StackText;
+use crate::stats::LoopStats;
 use servo::{Servo, ServoParams};
 use session::{Refusal, Rules, SensorBuffer};
 
