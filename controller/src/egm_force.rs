@@ -23,9 +23,9 @@
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use robot::{Robot, Vec6};
+use scenario::geometry::{self, TaskFrame};
 use scenario::Scenario;
 
-use crate::model::TaskFrame;
 use crate::reference::{ReferenceGenerator, ReferenceParams, TaskReference};
 
 /// Deepest the admittance may command below the height where force control took over, m.
@@ -130,7 +130,7 @@ impl EgmForceLaw {
             cycle_s: s.egm.cycle_s,
             lead_s: s.egm.lag_s,
             rate_feedforward: s.controller.force_rate_feedforward,
-            rot_base_tool: crate::model::tool_down_rotation(),
+            rot_base_tool: geometry::tool_down_rotation(),
             y_cmd: None,
             last_q_ref: None,
         }

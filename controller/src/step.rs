@@ -8,11 +8,12 @@
 use messages::{state_flags, ControllerDiagnostics, ControllerStatus, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame};
 use nalgebra::{Matrix3, Vector3};
 use robot::Vec6;
+use scenario::geometry::{tool_down_rotation, TaskFrame};
 use scenario::Scenario;
 
 use crate::gains::Gains;
 use crate::law::ControlLaw;
-use crate::model::{controller_robot, tool_down_rotation, TaskFrame};
+use crate::model::controller_robot;
 use crate::reference::{ReferenceGenerator, ReferenceParams};
 
 /// Measured wrench on the tool in base axes at the TCP, (force, torque) as one 6-vector

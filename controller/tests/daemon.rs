@@ -19,10 +19,7 @@ fn start_q() -> [f64; 6] {
     // IK of the scenario start pose with the controller's own model.
     let s = Scenario::default();
     let robot = controller::model::controller_robot(&s);
-    let task = controller::model::TaskFrame::from_scenario(&s);
-    let p = controller::reference::ReferenceParams::from_scenario(&s);
-    let b = task.point_to_base(&p.start_task_m);
-    robot.ik_tcp(&robot::scenario_tcp_pose(b.x, b.y, b.z), &robot::scenario_ik_seed()).unwrap().into()
+    robot.ik_tcp(&scenario::geometry::start_tcp_pose(&s), &robot::scenario_ik_seed()).unwrap().into()
 }
 
 fn state(tick: u64, status: PlantStatus, q: [f64; 6]) -> JointState {

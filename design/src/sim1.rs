@@ -24,7 +24,7 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
     let h = period / n_sub as f64;
     let mut contact = StripContact::new(model, geo, h);
     let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
-    let rot: Matrix3<f64> = controller::model::tool_down_rotation();
+    let rot: Matrix3<f64> = scenario::geometry::tool_down_rotation();
     // Wheel centre (TCP) in the task frame: z along the strip, y up.
     let start = reference.params().start_task_m;
     let (mut y, mut vy, mut z) = (start.y, 0.0, start.z);
@@ -60,10 +60,11 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
             let tau = i as f64 * h;
             let zz = z0 + vz0 * tau + 0.5 * r.acc_mps2.z * tau * tau;
             let vz = vz0 + r.acc_mps2.z * tau;
-            let pos = Vector3::new(geo.strip_start_x_m + zz, geo.strip_y_m, geo.table_z_m + y);
-            let w = contact.substep(&pos, &rot, &Vec6::new(vz, 0.0, vy, 0.0, 0.0, 0.0));
+            let pos = geo.task.point_to_base(&Vector3::new(0.0, y, zz));
+            let v = geo.task.vector_to_base(&Vector3::new(0.0, vy, vz));
+            let w = contact.substep(&pos, &rot, &Vec6::new(v.x, v.y, v.z, 0.0, 0.0, 0.0));
             // m_w ÿ = u + p (the strip pushes the wheel up with p = −F_e).
-            let acc = (u + w.force_base_n.z) / wheel_mass_kg;
+            let acc = (u + geo.task.vector_to_task(&w.force_base_n).y) / wheel_mass_kg;
             y += vy * h + 0.5 * acc * h * h;
             vy += acc * h;
         }

@@ -31,7 +31,7 @@ use robot::Vec6;
 use scenario::Scenario;
 use strip::{CbBoundary, StripModel, StripParams, Substrate};
 
-use crate::physics::STRIP_TOP_HEIGHT_M;
+use scenario::geometry::{TaskFrame, STRIP_TOP_HEIGHT_M};
 
 /// z_a grid spacing of the wheel-direction table, m.
 pub const TABLE_STEP_M: f64 = 0.05e-3;
@@ -59,13 +59,11 @@ pub fn strip_params(s: &Scenario) -> StripParams {
     }
 }
 
-/// Where the strip lies and how the wheel touches it (SI, base frame of DESIGN section 3).
+/// Where the strip lies and how the wheel touches it (SI, DESIGN section 3).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactGeometry {
-    /// Base x of task z = 0, base y of task x = 0, base z of the strip bottom.
-    pub strip_start_x_m: f64,
-    pub strip_y_m: f64,
-    pub table_z_m: f64,
+    /// The strip's task frame in the base (`scenario::geometry`).
+    pub task: TaskFrame,
     pub wheel_radius_m: f64,
     /// Penalty stiffness (N/m) and damping (N s/m).
     pub stiffness_n_per_m: f64,
@@ -75,9 +73,7 @@ pub struct ContactGeometry {
 impl ContactGeometry {
     pub fn from_scenario(s: &Scenario) -> Self {
         ContactGeometry {
-            strip_start_x_m: s.placement.strip_start_x_m,
-            strip_y_m: s.placement.strip_y_m,
-            table_z_m: s.placement.table_z_m,
+            task: TaskFrame::from_scenario(s),
             wheel_radius_m: s.robot.wheel_radius_mm * 1e-3,
             stiffness_n_per_m: s.contact.stiffness_n_per_m,
             damping_ns_per_m: s.contact.damping_ns_per_m,
@@ -451,9 +447,10 @@ impl StripContact {
         let v = Vector3::new(twist_base[0], twist_base[1], twist_base[2]);
         let w = Vector3::new(twist_base[3], twist_base[4], twist_base[5]);
         let v_low = v + w.cross(&(d * self.geo.wheel_radius_m));
-        // Task coordinates: z along the strip (base x), y up (base z).
-        self.z_a_m = p_low.x - self.geo.strip_start_x_m;
-        let y_wheel_end = (p_low.z - self.geo.table_z_m) + v_low.z * h;
+        // Task coordinates: z along the strip, y up (the strip normal).
+        let p_low_task = self.geo.task.point_to_task(&p_low);
+        self.z_a_m = p_low_task.z;
+        let y_wheel_end = p_low_task.y + self.geo.task.vector_to_task(&v_low).y * h;
 
         let t = &self.table;
         let (g, s) = t.locate(self.z_a_m);
@@ -593,7 +590,8 @@ mod tests {
 
     /// TCP (wheel centre) position and tool-down orientation for the wheel's lowest point at task (z, y).
     fn tcp_at(g: &ContactGeometry, z: f64, y_low: f64) -> (Vector3<f64>, Matrix3<f64>) {
-        let pose = robot::scenario_tcp_pose(g.strip_start_x_m + z, g.strip_y_m, g.table_z_m + y_low + g.wheel_radius_m);
+        let p = g.task.point_to_base(&Vector3::new(0.0, y_low + g.wheel_radius_m, z));
+        let pose = robot::scenario_tcp_pose(p.x, p.y, p.z);
         (pose.translation.vector, pose.rotation.to_rotation_matrix().into_inner())
     }
 

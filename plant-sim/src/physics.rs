@@ -21,41 +21,17 @@
 use std::path::Path;
 
 use anyhow::Context;
-use robot::{Robot, Tool, Vec6};
+use robot::{Robot, Vec6};
+use scenario::geometry::{self, TaskFrame};
 use scenario::{Integrator, Scenario};
 
-pub use scenario::STRIP_TOP_HEIGHT_M;
-
-/// The tool the scenario describes (DESIGN section 3). Starts from [`Tool::default`] (a solid
-/// cylinder on the flange z axis) with its mass and inertia scaled to `robot.tool_mass_kg`, the
-/// TCP — the wheel centre, as the scenario field says — at `robot.tool_offset_m` along flange z,
-/// the COM half-way there, and the wheel radius from `robot.wheel_radius_mm`. The wheel's lowest
-/// point lies one radius below the TCP when the tool points down.
-/// The controller builds its model with the same rule (`controller::model::tool_from_scenario`).
-pub fn tool_from_scenario(s: &Scenario) -> Tool {
-    Tool::wheel_on_bracket(s.robot.tool_mass_kg, s.robot.tool_offset_m, s.robot.wheel_radius_mm * 1e-3)
-}
-
-/// The plant robot of a scenario: arm + tool, armature and viscous friction from `[robot]`, every
+/// The plant robot of a scenario: arm + tool ([`geometry::tool`], as the controller's), armature and viscous friction from `[robot]`, every
 /// mass and inertia scaled by `robot.plant_inertia_scale` (plant/controller mismatch studies).
 pub fn plant_robot(s: &Scenario) -> Robot {
-    Robot::irb2400_with_tool(tool_from_scenario(s))
+    Robot::irb2400_with_tool(geometry::tool(s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms))
         .scaled_inertia(s.robot.plant_inertia_scale)
-}
-
-/// Start pose of the TCP (wheel centre) in the base frame: the wheel's lowest point
-/// `trajectory.approach_height_mm` above the undeformed strip top, over the strip's centre line at
-/// task z = `trajectory.z_start_mm`, tool pointing straight down.
-pub fn start_tcp_pose(s: &Scenario) -> nalgebra::Isometry3<f64> {
-    let p = &s.placement;
-    let t = &s.trajectory;
-    robot::scenario_tcp_pose(
-        p.strip_start_x_m + t.z_start_mm * 1e-3,
-        p.strip_y_m,
-        p.table_z_m + STRIP_TOP_HEIGHT_M + t.approach_height_mm * 1e-3 + s.robot.wheel_radius_mm * 1e-3,
-    )
 }
 
 /// Plant state and integrator.
@@ -69,8 +45,8 @@ pub struct Physics {
     integrator: Integrator,
     /// Simulated time of the current state, s.
     time_s: f64,
-    /// Task z of the strip start (base x), m, for the recorded wheel position.
-    strip_start_x_m: f64,
+    /// Where the strip lies, for the recorded wheel position without the strip.
+    task: TaskFrame,
     /// Strip + wheel contact (`contact.rs`); None when `strip.enabled = false`.
     contact: Option<crate::contact::StripContact>,
     /// End stops and drive torque–speed limits, applied inside every integrator stage.
@@ -78,7 +54,7 @@ pub struct Physics {
 }
 
 impl Physics {
-    /// Build the plant of a scenario, at rest in the start pose (IK of [`start_tcp_pose`]).
+    /// Build the plant of a scenario, at rest in the start pose (IK of [`geometry::start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
         let model = if s.strip.enabled {
@@ -102,7 +78,7 @@ impl Physics {
             crate::contact::StripContact::new(model, crate::contact::ContactGeometry::from_scenario(s), h)
         });
         let robot = plant_robot(s);
-        let target = start_tcp_pose(s);
+        let target = geometry::start_tcp_pose(s);
         let q = robot
             .ik_tcp(&target, &robot::scenario_ik_seed())
             .with_context(|| format!("start pose {:?} of the scenario is not reachable", target.translation.vector))?;
@@ -116,7 +92,7 @@ impl Physics {
             dt_sub_s: s.loop_.period_s / s.loop_.substeps as f64,
             integrator: s.loop_.integrator,
             time_s: 0.0,
-            strip_start_x_m: s.placement.strip_start_x_m,
+            task: TaskFrame::from_scenario(s),
             contact,
         })
     }
@@ -255,14 +231,14 @@ impl Physics {
     }
 
     /// Strip outputs of the current state for the recording. Robot-only: the wheel position along
-    /// the strip (task z = base x − strip start) and zero forces.
+    /// the strip (the TCP's task z) and zero forces.
     pub fn fill_strip_record(&self, r: &mut recordings::StripRecord) {
         if let Some(c) = &self.contact {
             c.fill_record(r);
             return;
         }
         let tcp = self.robot.tcp_pose(&self.q);
-        r.wheel_z_m = tcp.translation.vector.x - self.strip_start_x_m;
+        r.wheel_z_m = self.task.point_to_task(&tcp.translation.vector).z;
         r.contact_force_n = 0.0;
         r.bottom_force_n = 0.0;
         r.max_bottom_pressure_pa = 0.0;
@@ -286,7 +262,7 @@ mod tests {
         let s = scenario();
         let p = Physics::new(&s, Path::new("/nonexistent")).unwrap();
         let tcp = p.robot().tcp_pose(&p.q());
-        let err = (tcp.translation.vector - start_tcp_pose(&s).translation.vector).norm();
+        let err = (tcp.translation.vector - geometry::start_tcp_pose(&s).translation.vector).norm();
         assert!(err < 1e-9, "TCP {err} m from the start pose");
         assert_eq!(p.qd(), Vec6::zeros());
     }

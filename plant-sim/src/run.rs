@@ -346,7 +346,6 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
 /// model's top surface (`recordings::scene`).
 fn scene_config(s: &scenario::Scenario, contact: Option<&crate::contact::StripContact>) -> recordings::scene::SceneConfig {
     use recordings::scene::{SceneConfig, StripGeometry};
-    let p = &s.placement;
     let params = crate::contact::strip_params(s);
     let strip = contact.map(|c| {
         let top = c.top_xyz_m();
@@ -366,8 +365,8 @@ fn scene_config(s: &scenario::Scenario, contact: Option<&crate::contact::StripCo
     });
     SceneConfig {
         rate_hz: s.recording.scene_rate_hz,
-        tool: crate::physics::tool_from_scenario(s),
-        task_in_base: SceneConfig::task_frame(p.strip_start_x_m, p.strip_y_m, p.table_z_m),
+        tool: scenario::geometry::tool(s),
+        task_in_base: scenario::geometry::TaskFrame::from_scenario(s).pose_in_base(),
         strip,
     }
 }

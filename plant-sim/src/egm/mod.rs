@@ -90,7 +90,7 @@ impl EgmParams {
 /// The servo's model: the scenario's arm and tool, armature and friction, without the plant's
 /// inertia mismatch (`robot.plant_inertia_scale`).
 pub fn servo_model(s: &Scenario) -> Robot {
-    Robot::irb2400_with_tool(crate::physics::tool_from_scenario(s))
+    Robot::irb2400_with_tool(scenario::geometry::tool(s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms))
 }
