@@ -99,7 +99,8 @@ pub struct EgmOutput {
     /// Joint reference, DH rad.
     pub q_ref: Vec6,
     pub reference: TaskReference,
-    /// Measured force on the strip along task y, N (negative = pressing).
+    /// Measured force on the strip along task y (F_e's task-y component), N (negative = pressing;
+    /// messages/README.md, "Frames and signs").
     pub force_y_n: f64,
     /// Commanded TCP position, task frame, m.
     pub pos_cmd_task_m: Vector3<f64>,

@@ -41,7 +41,8 @@ pub struct TaskReference {
     pub pos_m: Vector3<f64>,
     pub vel_mps: Vector3<f64>,
     pub acc_mps2: Vector3<f64>,
-    /// Force set-point on the strip along task y, N (negative = pressing), and its rate, N/s.
+    /// Force set-point on the strip along task y (F_r), N (negative = pressing; messages/README.md,
+    /// "Frames and signs"), and its rate, N/s.
     pub force_y_n: f64,
     pub force_rate_y_nps: f64,
     /// True while task y is force controlled (hybrid impedance); false for position control.

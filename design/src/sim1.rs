@@ -52,7 +52,8 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
             integral = 0.0;
             r.acc_mps2.y + kp * (r.pos_m.y - y) + kd * (r.vel_mps.y - vy)
         };
-        // (6.2): control force with the measured contact force fed forward (F_e = −p).
+        // (6.2): control force with the measured contact force fed forward (F_e = −p, the force
+        // on the strip along task y; messages/README.md, "Frames and signs").
         let u = wheel_mass_kg * a + f_meas;
         // z follows its reference exactly over the tick (motion control is not the 1-DOF's topic).
         let (z0, vz0) = (z, r.vel_mps.z);

@@ -279,16 +279,17 @@ impl WheelTable {
     }
 }
 
-/// Contact of one substep, as the robot sees it.
+/// Contact of one substep, as the robot sees it: the wrench the strip exerts ON the tool, −F_e
+/// (messages/README.md, "Frames and signs").
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct ContactWrench {
+pub struct WrenchOnTool {
     /// Force and torque ON the tool about the TCP, base axes.
     pub force_base_n: Vector3<f64>,
     pub torque_base_nm: Vector3<f64>,
 }
 
-impl ContactWrench {
-    /// As a 6-vector (force, torque) for `Jᵀ W` with the TCP Jacobian.
+impl WrenchOnTool {
+    /// As a 6-vector (force, torque) for `Jᵀ W` = `−Jᵀ F_e` with the TCP Jacobian.
     pub fn as_vec6(&self) -> Vec6 {
         let (f, m) = (self.force_base_n, self.torque_base_nm);
         Vec6::new(f.x, f.y, f.z, m.x, m.y, m.z)
@@ -326,7 +327,7 @@ pub struct StripContact {
     z_a_m: f64,
     delta_prev_m: f64,
     force_y_n: f64,
-    wrench: ContactWrench,
+    wrench: WrenchOnTool,
 }
 
 impl StripContact {
@@ -407,7 +408,7 @@ impl StripContact {
             z_a_m: 0.0,
             delta_prev_m: f64::NEG_INFINITY,
             force_y_n: 0.0,
-            wrench: ContactWrench::default(),
+            wrench: WrenchOnTool::default(),
         }
     }
 
@@ -441,7 +442,7 @@ impl StripContact {
     /// One substep: contact force from the wheel state at the substep start (TCP = wheel centre
     /// position, tool orientation and TCP twist (v, ω), base frame), strip advanced by h. Returns
     /// the wrench on the tool to hold over the substep.
-    pub fn substep(&mut self, tcp_pos_base: &Vector3<f64>, rot_base_tool: &Matrix3<f64>, twist_base: &Vec6) -> ContactWrench {
+    pub fn substep(&mut self, tcp_pos_base: &Vector3<f64>, rot_base_tool: &Matrix3<f64>, twist_base: &Vec6) -> WrenchOnTool {
         let h = self.h_s;
         let (p_low, d) = self.lowest_point(tcp_pos_base, rot_base_tool);
         let v = Vector3::new(twist_base[0], twist_base[1], twist_base[2]);
@@ -483,19 +484,19 @@ impl StripContact {
         }
         // The wheel gets +p along base z at its lowest point.
         let force = Vector3::new(0.0, 0.0, p);
-        self.wrench = ContactWrench { force_base_n: force, torque_base_nm: (d * self.geo.wheel_radius_m).cross(&force) };
+        self.wrench = WrenchOnTool { force_base_n: force, torque_base_nm: (d * self.geo.wheel_radius_m).cross(&force) };
         self.wrench
     }
 
     /// Wrench of the last substep on the tool as a flange-mounted sensor reports it
-    /// (`messages::WrenchFrame::SensorAtTcp`: tool/flange axes, about the TCP).
-    pub fn wrench_sensor(&self, rot_base_tool: &Matrix3<f64>) -> ([f64; 3], [f64; 3]) {
+    /// (`messages::WrenchFrame::SensorAtTcp`: tool/flange axes, about the TCP), −F_e.
+    pub fn wrench_on_tool_sensor(&self, rot_base_tool: &Matrix3<f64>) -> ([f64; 3], [f64; 3]) {
         let rt = rot_base_tool.transpose();
         ((rt * self.wrench.force_base_n).into(), (rt * self.wrench.torque_base_nm).into())
     }
 
-    /// Last substep's wrench on the tool (base axes, about the TCP).
-    pub fn wrench(&self) -> ContactWrench {
+    /// Last substep's wrench on the tool (base axes, about the TCP), −F_e.
+    pub fn wrench_on_tool(&self) -> WrenchOnTool {
         self.wrench
     }
 
@@ -504,7 +505,8 @@ impl StripContact {
         self.force_y_n < 0.0
     }
 
-    /// Contact force on the strip along +y (N, pressing negative) of the last substep.
+    /// Force of the wheel on the strip along task y of the last substep, N: F_e's task-y
+    /// component, negative when pressing (messages/README.md, "Frames and signs").
     pub fn contact_force_n(&self) -> f64 {
         self.force_y_n
     }
@@ -658,7 +660,7 @@ mod tests {
             assert!((r.top_centreline_uy_m[k] - want).abs() < 1e-4 * scale, "crest node {k}: {} vs {want}", r.top_centreline_uy_m[k]);
         }
         // The wrench on the tool: +p along base z, no moment about the wheel centre.
-        let wr = c.wrench();
+        let wr = c.wrench_on_tool();
         assert!((wr.force_base_n.z - p).abs() < 1e-12 && wr.torque_base_nm.norm() < 1e-12 * p);
     }
 
@@ -685,7 +687,7 @@ mod tests {
         let c = run_hold(&model, 1e-4, 0.004, STRIP_TOP_HEIGHT_M + 0.5e-3, 0.05);
         assert_eq!(c.contact_force_n(), 0.0);
         assert!(!c.in_contact());
-        assert_eq!(c.wrench().force_base_n, Vector3::zeros());
+        assert_eq!(c.wrench_on_tool().force_base_n, Vector3::zeros());
     }
 
     /// Approach at 10 mm/s, touch, press 0.3 mm, lift off again; halving the substep changes the

@@ -1,5 +1,7 @@
 //! The plant's physics: the IRB 2400 with its applicator wheel, (7.1)
-//! `M(q) q̈ + C(q, q̇) q̇ + g(q) + Jᵀ(q) F_e = τ`, advanced one control tick at a time.
+//! `M(q) q̈ + C(q, q̇) q̇ + g(q) + Jᵀ(q) F_e = τ`, advanced one control tick at a time. F_e is the
+//! wrench the tool exerts on the strip; the contact hands over its opposite, the wrench on the
+//! tool W = −F_e, which enters as `+Jᵀ W` (messages/README.md, "Frames and signs").
 //!
 //! Integrator: `loop.substeps` equal substeps per tick (default 10, i.e. 100 µs at 1 kHz), each
 //! one step of `loop.integrator` on `(q, q̇)`: explicit midpoint (second-order Runge–Kutta, the
@@ -151,7 +153,8 @@ impl Physics {
         (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
     }
 
-    /// Magnitude of the wheel–strip contact force, N (0 without a strip).
+    /// Force of the wheel on the strip along task y, N: F_e's task-y component, negative when
+    /// pressing (0 without a strip).
     pub fn contact_force_n(&self) -> f64 {
         self.contact.as_ref().map_or(0.0, |c| c.contact_force_n())
     }
@@ -159,7 +162,7 @@ impl Physics {
     /// Advance one tick with the joint torque `tau` (N m) held constant: `substeps` steps of the
     /// integrator. With the strip, each substep first advances the contact (`contact.rs`: strip
     /// exact, force implicit at the substep end) from the TCP state at the substep start; its
-    /// wrench on the tool W enters the robot as the generalized force J(q)ᵀ W held over the substep.
+    /// wrench on the tool W = −F_e enters the robot as the generalized force J(q)ᵀ W held over the substep.
     pub fn step_tick(&mut self, tau_cmd: &Vec6) {
         let h = self.dt_sub_s;
         for _ in 0..self.substeps {
@@ -211,11 +214,11 @@ impl Physics {
         (q + (k1v + v2 * 2.0 + v3 * 2.0 + v4) * (h / 6.0), qd + (k1a + k2a * 2.0 + k3a * 2.0 + k4a) * (h / 6.0))
     }
 
-    /// End-effector wrench the strip exerts on the tool, as the sensor reports it
+    /// End-effector wrench the strip exerts on the tool (−F_e), as the sensor reports it
     /// ([`messages::WrenchFrame::SensorAtTcp`]): `(force N, torque N m)`. Zero without contact.
-    pub fn wrench(&self) -> ([f64; 3], [f64; 3]) {
+    pub fn wrench_on_tool(&self) -> ([f64; 3], [f64; 3]) {
         match &self.contact {
-            Some(c) => c.wrench_sensor(&self.robot.frames(&self.q).rot[6]),
+            Some(c) => c.wrench_on_tool_sensor(&self.robot.frames(&self.q).rot[6]),
             None => ([0.0; 3], [0.0; 3]),
         }
     }

@@ -159,7 +159,7 @@ impl PlantTick {
     }
 
     fn wrench(&self) -> Wrench {
-        let (force, torque) = self.physics.wrench();
+        let (force, torque) = self.physics.wrench_on_tool();
         Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick: self.tick, force, torque }
     }
 

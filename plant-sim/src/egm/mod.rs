@@ -208,7 +208,7 @@ impl<'a> EgmLoop<'a> {
         let wall_ns = self.start_wall_ns + sim_ns;
         let fb_pose = robot.tcp_pose(&q);
         let planned_pose = robot.tcp_pose(&q_r);
-        let (force, torque) = self.physics.wrench();
+        let (force, torque) = self.physics.wrench_on_tool();
         let q_deg = egm::axes::abb_deg_from_dh(&q.into());
         let r_deg = egm::axes::abb_deg_from_dh(&q_r.into());
         let m = &mut self.robot_msg;
@@ -441,7 +441,7 @@ impl EgmLoop<'_> {
                 consecutive_misses: 0,
                 total_misses: 0,
             };
-            let (force, torque) = self.physics.wrench();
+            let (force, torque) = self.physics.wrench_on_tool();
             let wrench = Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick, force, torque };
             let pre_ns = rt::now_mono_ns() - wake_ns;
             let t0 = rt::now_mono_ns();
