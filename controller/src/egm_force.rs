@@ -124,7 +124,7 @@ pub struct EgmForceLaw {
 impl EgmForceLaw {
     pub fn new(s: &Scenario) -> EgmForceLaw {
         EgmForceLaw {
-            robot: crate::model::controller_robot(s),
+            robot: crate::step::controller_robot(s),
             task: TaskFrame::from_scenario(s),
             gen: ReferenceGenerator::new(ReferenceParams::from_scenario(s)),
             design: EgmForceDesign::from_scenario(s),

@@ -258,8 +258,8 @@ impl ControlLaw {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::controller_robot;
     use crate::reference::{Phase, ReferenceGenerator, ReferenceParams};
+    use crate::step::controller_robot;
     use nalgebra::{Rotation3, Unit};
     use scenario::geometry::{self, tool_down_rotation};
     use scenario::Scenario;
@@ -269,7 +269,7 @@ mod tests {
         let robot = controller_robot(&s);
         let task = TaskFrame::from_scenario(&s);
         let gains = Gains::from_scenario(&s, 10.0);
-        let q0 = robot.ik_tcp(&geometry::start_tcp_pose(&s), &robot::scenario_ik_seed()).unwrap();
+        let q0 = robot.ik_tcp(&geometry::start_tcp_pose(&s), &robot::ik_seed_tool_down()).unwrap();
         (s, ControlLaw::new(robot, task, gains, tool_down_rotation()), q0)
     }
 

@@ -62,9 +62,9 @@ pub struct DesignResult {
 
 /// The robot's task-space mass along the strip normal at the scenario's start pose (controller model).
 pub fn start_pose_effective_mass(s: &Scenario) -> anyhow::Result<f64> {
-    let robot = controller::model::controller_robot(s);
+    let robot = controller::step::controller_robot(s);
     let task = TaskFrame::from_scenario(s);
-    let q = robot.ik_tcp(&geometry::start_tcp_pose(s), &robot::scenario_ik_seed()).context("start pose IK")?;
+    let q = robot.ik_tcp(&geometry::start_tcp_pose(s), &robot::ik_seed_tool_down()).context("start pose IK")?;
     let law = controller::law::ControlLaw::new(robot, task, Gains::from_scenario(s, f64::NAN), geometry::tool_down_rotation());
     Ok(controller::daemon::effective_normal_mass(&law, &q))
 }

@@ -593,7 +593,7 @@ mod tests {
     /// TCP (wheel centre) position and tool-down orientation for the wheel's lowest point at task (z, y).
     fn tcp_at(g: &ContactGeometry, z: f64, y_low: f64) -> (Vector3<f64>, Matrix3<f64>) {
         let p = g.task.point_to_base(&Vector3::new(0.0, y_low + g.wheel_radius_m, z));
-        let pose = robot::scenario_tcp_pose(p.x, p.y, p.z);
+        let pose = robot::tool_down_pose(p.x, p.y, p.z);
         (pose.translation.vector, pose.rotation.to_rotation_matrix().into_inner())
     }
 

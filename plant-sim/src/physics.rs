@@ -82,7 +82,7 @@ impl Physics {
         let robot = plant_robot(s);
         let target = geometry::start_tcp_pose(s);
         let q = robot
-            .ik_tcp(&target, &robot::scenario_ik_seed())
+            .ik_tcp(&target, &robot::ik_seed_tool_down())
             .with_context(|| format!("start pose {:?} of the scenario is not reachable", target.translation.vector))?;
         let limits = crate::limits::JointLimits::irb2400(&robot.mass_matrix(&q).diagonal());
         Ok(Physics {

@@ -79,9 +79,9 @@ pub fn tool(s: &Scenario) -> Tool {
 }
 
 /// Tool orientation of the whole run, base frame: pointing straight down, wheel axis across the
-/// strip ([`robot::scenario_tcp_pose`]'s rotation by π about base x).
+/// strip ([`robot::tool_down_pose`]'s rotation by π about base x).
 pub fn tool_down_rotation() -> Matrix3<f64> {
-    robot::scenario_tcp_pose(0.0, 0.0, 0.0).rotation.to_rotation_matrix().into_inner()
+    robot::tool_down_pose(0.0, 0.0, 0.0).rotation.to_rotation_matrix().into_inner()
 }
 
 /// Start position of the TCP (wheel centre) in task coordinates: the wheel's lowest point
@@ -103,7 +103,7 @@ pub fn start_tcp_pose(s: &Scenario) -> Isometry3<f64> {
     let p = task.point_to_base(&Vector3::new(0.0, STRIP_TOP_HEIGHT_M, t.z_start_mm * 1e-3))
         + up(t.approach_height_mm * 1e-3)
         + up(s.robot.wheel_radius_mm * 1e-3);
-    robot::scenario_tcp_pose(p.x, p.y, p.z)
+    robot::tool_down_pose(p.x, p.y, p.z)
 }
 
 #[cfg(test)]
