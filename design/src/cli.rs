@@ -6,6 +6,7 @@
 //! 2. Bode plots (Figures 6.2, 6.3): plant P, plant with velocity loop P_v, loop gain L, S, T,
 //!    with crossover, phase margin and sensitivity peak (targets: ~25 Hz, ~90°, < 6 dB).
 //! 3. The 1-DOF servo run over the bulge (Figure 6.7) with its max/RMS force error.
+//!
 //! Figures as PNG + SVG and every number in `design.json` under the output directory.
 
 use std::path::{Path, PathBuf};

@@ -2,6 +2,9 @@
 //! robot models ([`cli`]), plus in-process servo simulations ([`servo`]: 6-DOF, [`sim1`]: 1-DOF)
 //! and the acceptance figures measured from recordings ([`metrics`]).
 
+// The numerical kernels index several arrays with one index, as the formulas they implement do.
+#![allow(clippy::needless_range_loop)]
+
 pub mod cli;
 pub mod egm;
 pub mod freq;

@@ -109,7 +109,7 @@ mod tests {
             1.0 / crate::plant1::StripPoint::new(&model, 0.01).compliance(nalgebra::Complex::new(0.0, 0.0)).re;
         let gains = Gains::from_scenario(&s, 20.0);
         let out = run_1dof(&s, &model, &gains, 20.0);
-        let last_dwell = out.iter().filter(|x| x.phase == Phase::Dwell).last().expect("dwell phase");
+        let last_dwell = out.iter().rfind(|x| x.phase == Phase::Dwell).expect("dwell phase");
         assert!((last_dwell.bottom_force_n - s.trajectory.force_ref_n).abs() < 2e-3, "{last_dwell:?}");
         assert!((last_dwell.contact_force_n - last_dwell.bottom_force_n).abs() < 1e-3);
         let last = out.last().unwrap();

@@ -4,7 +4,7 @@
 //! transparent: every state, wrench and torque is bit-identical to the daemons' lockstep run of
 //! the same scenario (tests/tests/tick_identity.rs, sweep.rs).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
@@ -82,7 +82,7 @@ pub fn run(
     };
     let summary = RunSummary {
         stats,
-        recording: path.clone().map(PathBuf::from),
+        recording: path.clone(),
         drops,
         recording_stopped_early,
         mode: Mode::Lockstep,

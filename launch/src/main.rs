@@ -421,10 +421,6 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
 /// every case reached its end but some with a safe stop, reflex, refused torque or an incomplete
 /// recording, 1 if a case failed, 130/143 if the sweep was interrupted.
 fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
-    anyhow::ensure!(
-        a.launch.controller.is_none(),
-        "rig sweep runs its cases in process with the built-in controller; --controller needs rig run"
-    );
     let base_path = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
     let base = sweep::load_base(&base_path)?;
     let dir = a.launch.out.unwrap_or_else(|| Path::new("runs").join(format!("sweep-{}", utc_stamp())));
@@ -443,6 +439,11 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
         check_duration("--duration", a.launch.duration, &s, &path)?;
         planned.push((case_dir, path, label));
     }
+    // After every case's scenario is checked, so that a bad value is named first.
+    anyhow::ensure!(
+        a.launch.controller.is_none(),
+        "rig sweep runs its cases in process with the built-in controller; --controller needs rig run"
+    );
     plant_sim::rt::install_stop_signals();
     let cache_dir = strip::cache::cache_dir();
     let models = sweep::SharedModels::new(&cache_dir);

@@ -183,7 +183,7 @@ pub fn table(results: &[CaseResult]) -> String {
 pub fn load_base(path: &Path) -> anyhow::Result<toml::Table> {
     scenario::Scenario::load(path)?;
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(text.parse().with_context(|| format!("parsing {}", path.display()))?)
+    text.parse().with_context(|| format!("parsing {}", path.display()))
 }
 
 /// `rig run --set ...`: the base scenario with each axis' single value, written to `out` and

@@ -43,7 +43,7 @@ impl AtomicId {
             let s0 = self.seq.load(Ordering::Acquire);
             let hi = self.hi.load(Ordering::Acquire);
             let lo = self.lo.load(Ordering::Acquire);
-            if s0 % 2 == 0 && self.seq.load(Ordering::Acquire) == s0 {
+            if s0.is_multiple_of(2) && self.seq.load(Ordering::Acquire) == s0 {
                 return (u128::from(hi) << 64) | u128::from(lo);
             }
             std::hint::spin_loop();

@@ -5,7 +5,7 @@
 //! 1. z_a = task z of the wheel's lowest point; Gaussian wheel direction w(z_a) (5.33)-(5.34).
 //! 2. Strip surface under the wheel at the END of the substep, with the contact force f held over
 //!    the substep (pressing: f < 0 along +y):
-//!        s = H + wᵀ u_bulge + wᵀ C_top (Z x) + d_h f,   d_h = wᵀ D_top w + Re Σ_k c_k γ_k b_k
+//!    `s = H + wᵀ u_bulge + wᵀ C_top (Z x) + d_h f`,   `d_h = wᵀ D_top w + Re Σ_k c_k γ_k b_k`,
 //!    where Z = e^{Λh}, γ = (Z − 1)/Λ is the exact ZOH of the modal form, so d_h is the strip's
 //!    compliance under the wheel over one substep (the matched-DC D term is its instantaneous part).
 //! 3. Penetration δ = s − y_wheel (wheel height predicted to the substep end from its velocity);
@@ -236,8 +236,8 @@ impl WheelTable {
                 gb[k] = g_re[k] * b_re[k] - g_im[k] * b_im[k];
                 gb[modes + k] = g_re[k] * b_im[k] + g_im[k] * b_re[k];
             }
-            for i in 0..n_top {
-                dw[i] = nz.iter().map(|&j| model.d[(i, j)] * w[j]).sum();
+            for (i, dw_i) in dw.iter_mut().enumerate().take(n_top) {
+                *dw_i = nz.iter().map(|&j| model.d[(i, j)] * w[j]).sum();
             }
             t.d_ww[g] = nz.iter().map(|&i| w[i] * dw[i]).sum();
             t.d_sum[g] = nz.iter().map(|&j| d_colsum[j] * w[j]).sum();
@@ -670,7 +670,7 @@ mod tests {
     #[test]
     fn four_row_dot_equals_the_single_row_dot_bit_for_bit() {
         for n in [0, 5, 8, 264, 267] {
-            let v = |seed: f64| -> Vec<f64> { (0..n).map(|i| ((i as f64 + seed) * 0.7).sin() * 10f64.powi(i as i32 % 7 - 3)).collect() };
+            let v = |seed: f64| -> Vec<f64> { (0..n).map(|i| ((i as f64 + seed) * 0.7).sin() * 10f64.powi(i % 7 - 3)).collect() };
             let (x, r0, r1, r2, r3) = (v(0.1), v(1.3), v(2.9), v(4.4), v(5.5));
             let rows = [&r0[..], &r1[..], &r2[..], &r3[..]];
             for (got, want) in [(dot4(rows, &x), rows.map(|r| dot(r, &x))), (dot4_portable(rows, &x), rows.map(|r| dot_portable(r, &x)))] {

@@ -18,8 +18,8 @@ pub const COMPUTE_SHARE: f64 = 0.7;
 /// is a host stall: what the probe counts and time-stamps.
 pub const HOST_STALL_NS: u64 = 100_000;
 /// Stalls that count for a missed tick are those overlapping its deadline's period before (more
-/// before skipped periods) up to this many periods after its deadline (the budget, the plant's
-/// finish and a late publish all end before that).
+/// before skipped periods) up to this many periods after its deadline (the budget and a late
+/// publish end before that), or up to the plant's finish if that was later.
 const STALL_LOOKAHEAD_PERIODS: i64 = 2;
 /// The sliding window of the success rate, periods (100 ms at 1 kHz).
 pub const WINDOW_PERIODS: usize = 100;
@@ -289,7 +289,8 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
                 // The stalls around this tick, on its time line (ns from its deadline).
                 let d = s.deadline_since_start_ns as i64;
                 let p = period_ns as i64;
-                let (lo, hi) = (d - (i64::from(s.skipped_periods) + 1) * p, d + STALL_LOOKAHEAD_PERIODS * p);
+                // ... up to the plant's finish when that was later (a plant woken 5 ms late).
+                let (lo, hi) = (d - (i64::from(s.skipped_periods) + 1) * p, d + (STALL_LOOKAHEAD_PERIODS * p).max(s.plant_done_ns));
                 let end = seen.partition_point(|x| x.from_ns < hi);
                 let begin = seen[..end].partition_point(|x| x.from_ns < lo - longest_ns);
                 let stalls: Vec<Stall> = seen[begin..end]
@@ -383,7 +384,7 @@ pub fn format_table(a: &Attribution) -> String {
         s += "misses not attributed: the recording has no stage stamps\n";
         return s;
     }
-    s += &format!("| cause of a miss | misses | rate |\n| --- | --- | --- |\n");
+    s += "| cause of a miss | misses | rate |\n| --- | --- | --- |\n";
     let rate = |n: u64| n as f64 / a.periods as f64;
     for c in Cause::ALL {
         let n = a.count(c);
@@ -583,6 +584,33 @@ mod tests {
         let mut rows = rows;
         rows[17] = row(17, StageStamps { probe_period_ns: 250_000, ..missed() }, true);
         assert_eq!(attribute(&rows).cause_of_tick(17), Some(Cause::NoAnswer));
+    }
+
+    /// Tick 2978 of a `rig timing` run on 2026-12-02: the plant woke 5.62 ms after its deadline,
+    /// and the probe's report in the same row says it was 1.63 ms late for its deadline 2.875 ms
+    /// after the plant's: a stall inside the time the plant slept past its deadline, more than
+    /// two periods after the deadline. The host's; without that report, the plant's own.
+    #[test]
+    fn a_plant_woken_ms_late_is_the_hosts_if_the_probe_saw_a_stall_before_it_woke() {
+        let late = StageStamps {
+            probe_period_ns: 250_000,
+            plant_woke_ns: 5_622_000,
+            state_published_ns: 5_670_000,
+            budget_end_ns: 1_000_000,
+            torque_received_ns: 5_673_000,
+            plant_done_ns: 5_696_000,
+            ..missed()
+        };
+        let rows = |probe_late_ns: u64| -> Vec<TimingRow> {
+            (0..12u64)
+                .map(|k| match k {
+                    5 => row(k, StageStamps { probe_late_ns, probe_stall_from_ns: 2_875_000, ..late }, true),
+                    _ => row(k, StageStamps { probe_period_ns: 250_000, ..stamps() }, false),
+                })
+                .collect()
+        };
+        assert_eq!(attribute(&rows(1_630_000)).cause_of_tick(5), Some(Cause::Host));
+        assert_eq!(attribute(&rows(0)).cause_of_tick(5), Some(Cause::PlantLate));
     }
 
     #[test]

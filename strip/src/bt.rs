@@ -31,6 +31,7 @@ pub struct ModalSystem {
 /// Solved as L^-1 M L^-T v = mu v with K = L L^T and mu = 1 / w^2, Phi = L^-T V mu^-1/2: then
 /// sum_i phi_i phi_i^T / w_i^2 = K^-1 exactly (V orthogonal), so the modal static gain keeps the
 /// accuracy of the stiffness factorisation (the CB boundary block spans many decades).
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > 0.0)` refuses NaN too; `x <= 0.0` would let it through
 pub fn generalized_eigen(k: MatRef<'_, f64>, m: MatRef<'_, f64>) -> Result<(Vec<f64>, Mat<f64>)> {
     let n = k.nrows();
     let llt = k.llt(Side::Lower).map_err(|e| numeric("CB stiffness Cholesky", format!("K_CB not positive definite: {e:?}")))?;
@@ -307,6 +308,7 @@ fn hankel_leading(lc: &Mat<f64>, q: &Mat<f64>, r: usize) -> Result<(Vec<f64>, Ma
 ///   D_r = G(0) + C_r Ti_r A^-1 B,
 /// equal to A11 - A12 A22^-1 A21 etc. of (5.31) by the Schur complement of the inverse. A^-1 is
 /// block-diagonal in the modal basis, so only the r kept directions are ever formed.
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > 0.0)` refuses NaN too; `x <= 0.0` would let it through
 pub fn balanced_matched_dc(sys: &ModalSystem, order: usize, out_weight: &[f64]) -> Result<Reduced> {
     let n = sys.n_states();
     if order >= n {

@@ -82,6 +82,7 @@ impl Default for StripParams {
 
 impl StripParams {
     /// Rejects values the pipeline cannot handle, naming the field.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > 0.0)` refuses NaN too; `x <= 0.0` would let it through
     pub fn validate(&self) -> Result<(), StripError> {
         let bad = |field: &'static str, value: f64, why: &'static str| Err(StripError::Param { field, value, why });
         if !(self.length_m > 0.0 && self.length_m < 1.0) {

@@ -111,7 +111,7 @@ impl StripStepper {
     pub fn step(&mut self, top_forces: &[f64]) {
         assert_eq!(top_forces.len(), self.n_top);
         for x in self.xi.iter_mut().zip(&self.z) {
-            *x.0 = *x.0 * *x.1;
+            *x.0 *= *x.1;
         }
         for (j, &u) in top_forces.iter().enumerate() {
             if u != 0.0 {
@@ -274,7 +274,7 @@ impl StripStepper {
     /// Advances one step with the wheel load u = f_y w (N, +y; pressing is negative), O(modes).
     pub fn step_wheel(&mut self, f_y: f64) {
         for ((x, z), b) in self.xi.iter_mut().zip(&self.z).zip(&self.wheel_b) {
-            *x = *x * *z;
+            *x *= *z;
             x.re += b.re * f_y;
             x.im += b.im * f_y;
         }

@@ -57,16 +57,16 @@ fn bond_front_satisfies_signorini_conditions() {
         let sol = laying.solve(z_a, -10.0, BottomSupport::BondFront).unwrap();
         any_lifted |= sol.lifted > 0;
         let scale = sol.pressure_pa.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        for i in 0..z.len() {
-            if z[i] < z_a - 1e-9 {
+        for (i, &z_i) in z.iter().enumerate() {
+            if z_i < z_a - 1e-9 {
                 assert_eq!(sol.gap_m[i], 0.0, "bonded node {i} must sit on the substrate");
                 continue;
             }
-            assert!(sol.gap_m[i] >= -1e-9, "node {i} at z {} penetrates by {} m", z[i], -sol.gap_m[i]);
+            assert!(sol.gap_m[i] >= -1e-9, "node {i} at z {z_i} penetrates by {} m", -sol.gap_m[i]);
             if sol.gap_m[i] > 1e-9 {
                 assert!(sol.pressure_pa[i].abs() < 1e-9 * scale, "lifted node {i} carries {} Pa", sol.pressure_pa[i]);
             } else {
-                assert!(sol.pressure_pa[i] >= -1.0, "touching node {i} at z {} in tension: {} Pa", z[i], sol.pressure_pa[i]);
+                assert!(sol.pressure_pa[i] >= -1.0, "touching node {i} at z {z_i} in tension: {} Pa", sol.pressure_pa[i]);
             }
         }
     }

@@ -314,33 +314,6 @@ pub fn tick_at_wall_ns(rec: &recordings::read::Recording, ns: u64) -> Option<u64
     rec.timing.iter().find(|t| t.timing.publish_wall_ns >= ns).map(|t| t.tick)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use std::time::SystemTime;
-
-    /// A source modified after the binary (a space in its path included) is named; older sources
-    /// are not.
-    #[test]
-    fn a_source_newer_than_its_binary_is_found_from_the_dep_info() {
-        let d = temp_dir(&unique_rig("dep-info"));
-        let (exe, old_src, new_src) = (d.join("tool"), d.join("old.rs"), d.join("with space.rs"));
-        let at = |p: &Path, secs: u64| {
-            let f = std::fs::File::create(p).unwrap();
-            f.set_modified(SystemTime::UNIX_EPOCH + Duration::from_secs(secs)).unwrap();
-        };
-        at(&old_src, 1_000);
-        at(&exe, 2_000);
-        at(&new_src, 1_500);
-        let dep = d.join("tool.d");
-        let escaped = new_src.display().to_string().replace(' ', "\\ ");
-        std::fs::write(&dep, format!("{}: {} {escaped}\n", exe.display(), old_src.display())).unwrap();
-        assert_eq!(source_newer_than(&exe, &dep), None);
-        at(&new_src, 3_000);
-        assert_eq!(source_newer_than(&exe, &dep), Some(new_src));
-    }
-}
-
 /// A 64-bit FNV-1a digest of every tick's physics in a recording: each joint state (tick, time,
 /// q, q-dot, applied torque), wrench, applied torque row (answered tick, held, tau) and strip
 /// record (wheel z, contact and bottom forces, peak pressure, top displacement, centre-line
@@ -384,4 +357,31 @@ pub fn physics_digest(rec: &recordings::read::Recording) -> String {
         rec.joint_torque.len(),
         rec.strip.len()
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::SystemTime;
+
+    /// A source modified after the binary (a space in its path included) is named; older sources
+    /// are not.
+    #[test]
+    fn a_source_newer_than_its_binary_is_found_from_the_dep_info() {
+        let d = temp_dir(&unique_rig("dep-info"));
+        let (exe, old_src, new_src) = (d.join("tool"), d.join("old.rs"), d.join("with space.rs"));
+        let at = |p: &Path, secs: u64| {
+            let f = std::fs::File::create(p).unwrap();
+            f.set_modified(SystemTime::UNIX_EPOCH + Duration::from_secs(secs)).unwrap();
+        };
+        at(&old_src, 1_000);
+        at(&exe, 2_000);
+        at(&new_src, 1_500);
+        let dep = d.join("tool.d");
+        let escaped = new_src.display().to_string().replace(' ', "\\ ");
+        std::fs::write(&dep, format!("{}: {} {escaped}\n", exe.display(), old_src.display())).unwrap();
+        assert_eq!(source_newer_than(&exe, &dep), None);
+        at(&new_src, 3_000);
+        assert_eq!(source_newer_than(&exe, &dep), Some(new_src));
+    }
 }
