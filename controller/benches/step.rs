@@ -3,11 +3,12 @@
 use controller::daemon::step;
 use controller::gains::Gains;
 use controller::law::ControlLaw;
-use controller::model::{controller_robot, tool_down_rotation, TaskFrame};
 use controller::reference::{ReferenceGenerator, ReferenceParams};
+use controller::step::controller_robot;
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use messages::{JointState, Wrench, WrenchFrame, CONTRACT_VERSION};
 use robot::Vec6;
+use scenario::geometry::{self, tool_down_rotation, TaskFrame};
 use scenario::Scenario;
 
 fn bench(c: &mut Criterion) {
@@ -15,8 +16,7 @@ fn bench(c: &mut Criterion) {
     let robot = controller_robot(&s);
     let task = TaskFrame::from_scenario(&s);
     let p = ReferenceParams::from_scenario(&s);
-    let b = task.point_to_base(&p.start_task_m);
-    let q = robot.ik_tcp(&robot::scenario_tcp_pose(b.x, b.y, b.z), &robot::scenario_ik_seed()).unwrap();
+    let q = robot.ik_tcp(&geometry::start_tcp_pose(&s), &robot::ik_seed_tool_down()).unwrap();
     let qd = Vec6::new(0.01, -0.02, 0.01, 0.0, 0.02, 0.0);
     let mut law = ControlLaw::new(robot, task, Gains::from_scenario(&s, f64::NAN), tool_down_rotation());
     let mut reference = ReferenceGenerator::new(p);

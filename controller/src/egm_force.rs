@@ -23,9 +23,9 @@
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use robot::{Robot, Vec6};
+use scenario::geometry::{self, TaskFrame};
 use scenario::Scenario;
 
-use crate::model::TaskFrame;
 use crate::reference::{ReferenceGenerator, ReferenceParams, TaskReference};
 
 /// Deepest the admittance may command below the height where force control took over, m.
@@ -99,7 +99,8 @@ pub struct EgmOutput {
     /// Joint reference, DH rad.
     pub q_ref: Vec6,
     pub reference: TaskReference,
-    /// Measured force on the strip along task y, N (negative = pressing).
+    /// Measured force on the strip along task y (F_e's task-y component), N (negative = pressing;
+    /// messages/README.md, "Frames and signs").
     pub force_y_n: f64,
     /// Commanded TCP position, task frame, m.
     pub pos_cmd_task_m: Vector3<f64>,
@@ -123,14 +124,14 @@ pub struct EgmForceLaw {
 impl EgmForceLaw {
     pub fn new(s: &Scenario) -> EgmForceLaw {
         EgmForceLaw {
-            robot: crate::model::controller_robot(s),
+            robot: crate::step::controller_robot(s),
             task: TaskFrame::from_scenario(s),
             gen: ReferenceGenerator::new(ReferenceParams::from_scenario(s)),
             design: EgmForceDesign::from_scenario(s),
             cycle_s: s.egm.cycle_s,
             lead_s: s.egm.lag_s,
             rate_feedforward: s.controller.force_rate_feedforward,
-            rot_base_tool: crate::model::tool_down_rotation(),
+            rot_base_tool: geometry::tool_down_rotation(),
             y_cmd: None,
             last_q_ref: None,
         }

@@ -20,8 +20,8 @@ use nalgebra::{Matrix3, Vector3};
 use robot::{Frames, Mat6, Robot, Vec6};
 
 use crate::gains::Gains;
-use crate::model::TaskFrame;
 use crate::reference::TaskReference;
+use scenario::geometry::TaskFrame;
 
 /// Logarithm map of SO(3): the rotation vector θ·a of `r` (|θ| ≤ π), robust near 0 and π.
 pub fn so3_log(r: &Matrix3<f64>) -> Vector3<f64> {
@@ -258,9 +258,10 @@ impl ControlLaw {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{controller_robot, tool_down_rotation};
     use crate::reference::{Phase, ReferenceGenerator, ReferenceParams};
+    use crate::step::controller_robot;
     use nalgebra::{Rotation3, Unit};
+    use scenario::geometry::{self, tool_down_rotation};
     use scenario::Scenario;
 
     fn setup() -> (Scenario, ControlLaw, Vec6) {
@@ -268,10 +269,7 @@ mod tests {
         let robot = controller_robot(&s);
         let task = TaskFrame::from_scenario(&s);
         let gains = Gains::from_scenario(&s, 10.0);
-        let p = ReferenceParams::from_scenario(&s);
-        let target_base = task.point_to_base(&p.start_task_m);
-        let pose = robot::scenario_tcp_pose(target_base.x, target_base.y, target_base.z);
-        let q0 = robot.ik_tcp(&pose, &robot::scenario_ik_seed()).unwrap();
+        let q0 = robot.ik_tcp(&geometry::start_tcp_pose(&s), &robot::ik_seed_tool_down()).unwrap();
         (s, ControlLaw::new(robot, task, gains, tool_down_rotation()), q0)
     }
 

@@ -6,7 +6,6 @@ pub mod daemon;
 pub mod egm_force;
 pub mod gains;
 pub mod law;
-pub mod model;
 pub mod reference;
 pub mod step;
 

@@ -13,7 +13,7 @@
 use nalgebra::Vector3;
 use scenario::{Scenario, MAX_FORCE_POINTS};
 
-use crate::model::STRIP_TOP_HEIGHT_M;
+use scenario::geometry::{self, STRIP_TOP_HEIGHT_M};
 
 /// Phase of the run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -41,7 +41,8 @@ pub struct TaskReference {
     pub pos_m: Vector3<f64>,
     pub vel_mps: Vector3<f64>,
     pub acc_mps2: Vector3<f64>,
-    /// Force set-point on the strip along task y, N (negative = pressing), and its rate, N/s.
+    /// Force set-point on the strip along task y (F_r), N (negative = pressing; messages/README.md,
+    /// "Frames and signs"), and its rate, N/s.
     pub force_y_n: f64,
     pub force_rate_y_nps: f64,
     /// True while task y is force controlled (hybrid impedance); false for position control.
@@ -78,9 +79,9 @@ pub struct ReferenceParams {
 }
 
 impl ReferenceParams {
-    /// From the scenario: the wheel's lowest point starts `approach_height_mm` above the nominal
-    /// strip top at `z_start_mm`, centred on the strip (the plant's start pose); the TCP is the
-    /// wheel centre, one radius higher.
+    /// From the scenario: the TCP starts where the plant starts it
+    /// ([`geometry::start_tcp_task_m`]: the wheel's lowest point `approach_height_mm` above the
+    /// nominal strip top at `z_start_mm`, the TCP, the wheel centre, one radius higher).
     pub fn from_scenario(s: &Scenario) -> ReferenceParams {
         let t = &s.trajectory;
         let r = s.robot.wheel_radius_mm * 1e-3;
@@ -90,7 +91,7 @@ impl ReferenceParams {
             *k = [z_mm * 1e-3, f_n];
         }
         ReferenceParams {
-            start_task_m: Vector3::new(0.0, STRIP_TOP_HEIGHT_M + t.approach_height_mm * 1e-3 + r, z_start_m),
+            start_task_m: geometry::start_tcp_task_m(s),
             settle_s: t.settle_s,
             approach_speed_mps: t.approach_speed_mm_s * 1e-3,
             approach_ramp_s: 0.05,

@@ -3,16 +3,16 @@
 //! torque and its diagnostics. The daemon (`daemon.rs`), `rig run --in-process`, `rig sweep` and
 //! the tests all drive this one type, so the same code answers over iceoryx2 and in-process.
 //!
-//! Allocation-free per call (tests/no_alloc.rs counts).
+//! Allocation-free per call (`tests/tests/no_alloc.rs` counts, over a whole servo run).
 
 use messages::{state_flags, ControllerDiagnostics, ControllerStatus, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame};
 use nalgebra::{Matrix3, Vector3};
-use robot::Vec6;
+use robot::{Robot, Vec6};
+use scenario::geometry::{self, tool_down_rotation, TaskFrame};
 use scenario::Scenario;
 
 use crate::gains::Gains;
 use crate::law::ControlLaw;
-use crate::model::{controller_robot, tool_down_rotation, TaskFrame};
 use crate::reference::{ReferenceGenerator, ReferenceParams};
 
 /// Measured wrench on the tool in base axes at the TCP, (force, torque) as one 6-vector
@@ -22,6 +22,15 @@ pub fn wrench_on_tool_base(w: &Wrench, rot_base_tool: &Matrix3<f64>) -> Vec6 {
     let m = Vector3::from(w.torque);
     let (f, m) = if w.frame == WrenchFrame::SensorAtTcp as u32 { (rot_base_tool * f, rot_base_tool * m) } else { (f, m) };
     Vec6::new(f.x, f.y, f.z, m.x, m.y, m.z)
+}
+
+/// The controller's robot model: the scenario's arm and tool ([`geometry::tool`]) with armature
+/// and viscous friction, deliberately WITHOUT `robot.plant_inertia_scale` (that is the plant's
+/// mismatch).
+pub fn controller_robot(s: &Scenario) -> Robot {
+    Robot::irb2400_with_tool(geometry::tool(s))
+        .with_armature(Vec6::from(s.robot.armature_kgm2))
+        .with_viscous(Vec6::from(s.robot.viscous_nms))
 }
 
 /// The force controller of a scenario, between ticks.
@@ -162,4 +171,17 @@ pub fn step(
         published_mono_ns: 0,
     };
     (out.tau, diag)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn controller_robot_ignores_plant_inertia_scale() {
+        let mut s = Scenario::default();
+        let a = controller_robot(&s).total_mass_kg();
+        s.robot.plant_inertia_scale = 1.1;
+        assert_eq!(controller_robot(&s).total_mass_kg(), a);
+    }
 }

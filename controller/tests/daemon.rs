@@ -18,11 +18,8 @@ fn unique_rig(tag: &str) -> String {
 fn start_q() -> [f64; 6] {
     // IK of the scenario start pose with the controller's own model.
     let s = Scenario::default();
-    let robot = controller::model::controller_robot(&s);
-    let task = controller::model::TaskFrame::from_scenario(&s);
-    let p = controller::reference::ReferenceParams::from_scenario(&s);
-    let b = task.point_to_base(&p.start_task_m);
-    robot.ik_tcp(&robot::scenario_tcp_pose(b.x, b.y, b.z), &robot::scenario_ik_seed()).unwrap().into()
+    let robot = controller::step::controller_robot(&s);
+    robot.ik_tcp(&scenario::geometry::start_tcp_pose(&s), &robot::ik_seed_tool_down()).unwrap().into()
 }
 
 fn state(tick: u64, status: PlantStatus, q: [f64; 6]) -> JointState {
@@ -84,7 +81,7 @@ fn answers_every_tick_and_exits_on_shutdown() {
     assert_eq!(torques.len(), 20);
     // At rest at the start pose with no wrench: gravity compensation of the controller's model.
     let s = Scenario::default();
-    let g = controller::model::controller_robot(&s).gravity_torque(&robot::Vec6::from(q));
+    let g = controller::step::controller_robot(&s).gravity_torque(&robot::Vec6::from(q));
     let tau = robot::Vec6::from(torques[0].tau);
     assert!((tau - g).norm() < 1e-6 * g.norm(), "{tau} vs {g}");
     assert!(plant.receive_diagnostics().is_some());

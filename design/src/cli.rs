@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use controller::gains::Gains;
 use recording_tools::plots::{save_lines, LinePlot, Series};
+use scenario::geometry::{self, TaskFrame};
 use scenario::Scenario;
 use strip::StripModel;
 
@@ -62,12 +63,10 @@ pub struct DesignResult {
 
 /// The robot's task-space mass along the strip normal at the scenario's start pose (controller model).
 pub fn start_pose_effective_mass(s: &Scenario) -> anyhow::Result<f64> {
-    let robot = controller::model::controller_robot(s);
-    let task = controller::model::TaskFrame::from_scenario(s);
-    let p = controller::reference::ReferenceParams::from_scenario(s);
-    let b = task.point_to_base(&p.start_task_m);
-    let q = robot.ik_tcp(&robot::scenario_tcp_pose(b.x, b.y, b.z), &robot::scenario_ik_seed()).context("start pose IK")?;
-    let law = controller::law::ControlLaw::new(robot, task, Gains::from_scenario(s, f64::NAN), controller::model::tool_down_rotation());
+    let robot = controller::step::controller_robot(s);
+    let task = TaskFrame::from_scenario(s);
+    let q = robot.ik_tcp(&geometry::start_tcp_pose(s), &robot::ik_seed_tool_down()).context("start pose IK")?;
+    let law = controller::law::ControlLaw::new(robot, task, Gains::from_scenario(s, f64::NAN), geometry::tool_down_rotation());
     Ok(controller::daemon::effective_normal_mass(&law, &q))
 }
 

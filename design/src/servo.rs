@@ -1,21 +1,22 @@
-//! In-process 6-DOF servo simulation: the plant's physics (`plant_sim::physics`, robot + strip
-//! contact) and the controller's step (`controller::daemon::step`) in lockstep without IPC.
-//! Same computations as the two daemons in lockstep mode, minus the torque gate (no misses can
-//! occur in-process), so tracking studies (robustness table, substep convergence) run in seconds.
+//! In-process 6-DOF servo simulation: the plant's tick ([`plant_sim::PlantTick`]: physics,
+//! torque gate, limits) and the controller's step ([`controller::Controller::process`]) in one
+//! thread, no IPC. The same two values the daemons drive, so a servo run equals the lockstep run
+//! of its scenario tick for tick (tests/tests/tick_identity.rs proves that of `rig run
+//! --in-process`, which drives them the same way) and tracking studies (robustness table,
+//! substep convergence) run in seconds.
 
 use std::path::Path;
 
-use controller::gains::Gains;
-use controller::law::ControlLaw;
-use controller::model::{controller_robot, tool_down_rotation, TaskFrame};
-use controller::reference::{Phase, ReferenceGenerator, ReferenceParams};
-use messages::{JointState, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
-use plant_sim::physics::Physics;
+use controller::reference::Phase;
+use controller::Controller;
+use plant_sim::tick::FirstTicks;
+use plant_sim::PlantTick;
 use recording_tools::tracking::{rolling_force_tracking, ForceTracking, TrackingTick};
-use recordings::StripRecord;
-use scenario::Scenario;
+use scenario::{Mode, Scenario};
 
-/// One recorded sample of the servo run (per tick).
+/// One sample of the servo run per tick, as a lockstep recording has it: the state's time, the
+/// controller's phase and force reference after answering it, and the strip after the tick was
+/// integrated with that answer.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ServoSample {
     pub t_s: f64,
@@ -66,6 +67,9 @@ pub struct ServoRun {
     pub samples: Vec<ServoSample>,
     pub centreline_z_m: Vec<f64>,
     pub peak_pressure_pa: Vec<f64>,
+    /// The first tick of a safe stop, a reflex or a refused torque, if any: a run with one is
+    /// not the servo run its scenario describes (the gate and limits apply as in the daemons).
+    pub first: FirstTicks,
 }
 
 impl ServoRun {
@@ -81,65 +85,48 @@ impl ServoRun {
 }
 
 /// Run the scenario's servo run in-process for `duration_s` (0 = until the reference is done
-/// plus 0.1 s). `cache_dir`: the strip model cache.
+/// plus 0.1 s, at most 60 s). `cache_dir`: the strip model cache.
 pub fn run_servo(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow::Result<Vec<ServoSample>> {
     Ok(run_servo_full(s, cache_dir, duration_s)?.samples)
 }
 
 /// [`run_servo`] with the bond data.
 pub fn run_servo_full(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow::Result<ServoRun> {
-    let mut physics = Physics::new(s, cache_dir)?;
-    let task = TaskFrame::from_scenario(s);
-    let mut law = ControlLaw::new(controller_robot(s), task, Gains::from_scenario(s, f64::NAN), tool_down_rotation());
-    let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
+    let mut plant = PlantTick::from_scenario(s, cache_dir, Mode::Lockstep)?;
+    let mut controller = Controller::from_scenario(s);
     let period = s.loop_.period_s;
-    let mut out = Vec::new();
-    let mut rec = StripRecord::default();
     let max_ticks = if duration_s > 0.0 { (duration_s / period).round() as u64 } else { (60.0 / period) as u64 };
     let mut done_at: Option<u64> = None;
-    let centreline_z_m: Vec<f64> = physics.contact().map_or(Vec::new(), |c| c.centreline_z_m().to_vec());
+    let centreline_z_m: Vec<f64> = plant.physics().contact().map_or(Vec::new(), |c| c.centreline_z_m().to_vec());
     let mut peak = vec![f64::NEG_INFINITY; centreline_z_m.len()];
-    for tick in 0..max_ticks {
-        let (q, qd) = (physics.q(), physics.qd());
-        let state = JointState {
-            contract_version: CONTRACT_VERSION,
-            plant_status: PlantStatus::Running as u32,
-            tick,
-            sim_time_s: tick as f64 * period,
-            q: q.into(),
-            qd: qd.into(),
-            tau_applied: [0.0; 6],
-            period_s: period,
-            flags: 0,
-            consecutive_misses: 0,
-            total_misses: 0,
-        };
-        let (force, torque) = physics.wrench();
-        let wrench = Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick, force, torque };
-        let (tau, diag) = controller::daemon::step(&mut law, &mut reference, &state, &wrench, &q, &qd, CONTRACT_VERSION);
-        physics.fill_strip_record(&mut rec);
-        for (p, &x) in peak.iter_mut().zip(&rec.centreline_pressure_pa[..rec.n_centreline as usize]) {
-            *p = p.max(x);
-        }
-        out.push(ServoSample {
-            t_s: state.sim_time_s,
-            phase: reference.phase(),
-            force_ref_n: diag.force_ref_n,
-            contact_force_n: rec.contact_force_n,
-            bottom_force_n: rec.bottom_force_n,
-            wheel_z_m: rec.wheel_z_m,
-            z_ref_m: diag.pos_ref_task_m[2],
-        });
-        if !tau.iter().all(|x| x.is_finite()) {
+    let mut out = Vec::new();
+    while plant.tick() < max_ticks {
+        let tick = plant.tick();
+        let (state, wrench) = plant.outputs();
+        let (torque, diag) = controller.process(&state, &wrench);
+        if !torque.tau.iter().all(|x| x.is_finite()) {
             anyhow::bail!("non-finite torque at tick {tick}");
         }
-        physics.step_tick(&tau);
-        if duration_s <= 0.0 && reference.phase() == Phase::Done {
+        let strip = plant.advance(Some(&torque), None).strip;
+        for (p, &x) in peak.iter_mut().zip(&strip.centreline_pressure_pa[..strip.n_centreline as usize]) {
+            *p = p.max(x);
+        }
+        let phase = controller.reference().phase();
+        out.push(ServoSample {
+            t_s: state.sim_time_s,
+            phase,
+            force_ref_n: diag.force_ref_n,
+            contact_force_n: strip.contact_force_n,
+            bottom_force_n: strip.bottom_force_n,
+            wheel_z_m: strip.wheel_z_m,
+            z_ref_m: diag.pos_ref_task_m[2],
+        });
+        if duration_s <= 0.0 && phase == Phase::Done {
             let d = *done_at.get_or_insert(tick);
             if tick - d >= (0.1 / period) as u64 {
                 break;
             }
         }
     }
-    Ok(ServoRun { samples: out, centreline_z_m, peak_pressure_pa: peak })
+    Ok(ServoRun { samples: out, centreline_z_m, peak_pressure_pa: peak, first: plant.first_ticks() })
 }

@@ -24,7 +24,7 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
     let h = period / n_sub as f64;
     let mut contact = StripContact::new(model, geo, h);
     let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
-    let rot: Matrix3<f64> = controller::model::tool_down_rotation();
+    let rot: Matrix3<f64> = scenario::geometry::tool_down_rotation();
     // Wheel centre (TCP) in the task frame: z along the strip, y up.
     let start = reference.params().start_task_m;
     let (mut y, mut vy, mut z) = (start.y, 0.0, start.z);
@@ -53,7 +53,8 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
             integral = 0.0;
             r.acc_mps2.y + kp * (r.pos_m.y - y) + kd * (r.vel_mps.y - vy)
         };
-        // (6.2): control force with the measured contact force fed forward (F_e = −p).
+        // (6.2): control force with the measured contact force fed forward (F_e = −p, the force
+        // on the strip along task y; messages/README.md, "Frames and signs").
         let u = wheel_mass_kg * a + f_meas;
         // z follows its reference exactly over the tick (motion control is not the 1-DOF's topic).
         let (z0, vz0) = (z, r.vel_mps.z);
@@ -61,10 +62,11 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
             let tau = i as f64 * h;
             let zz = z0 + vz0 * tau + 0.5 * r.acc_mps2.z * tau * tau;
             let vz = vz0 + r.acc_mps2.z * tau;
-            let pos = Vector3::new(geo.strip_start_x_m + zz, geo.strip_y_m, geo.table_z_m + y);
-            let w = contact.substep(&pos, &rot, &Vec6::new(vz, 0.0, vy, 0.0, 0.0, 0.0));
+            let pos = geo.task.point_to_base(&Vector3::new(0.0, y, zz));
+            let v = geo.task.vector_to_base(&Vector3::new(0.0, vy, vz));
+            let w = contact.substep(&pos, &rot, &Vec6::new(v.x, v.y, v.z, 0.0, 0.0, 0.0));
             // m_w ÿ = u + p (the strip pushes the wheel up with p = −F_e).
-            let acc = (u + w.force_base_n.z) / wheel_mass_kg;
+            let acc = (u + geo.task.vector_to_task(&w.force_base_n).y) / wheel_mass_kg;
             y += vy * h + 0.5 * acc * h * h;
             vy += acc * h;
         }

@@ -8,10 +8,10 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
-use plant_sim::loop_rt::LoopStats;
 use plant_sim::physics::Physics;
 use plant_sim::recording::{EventKind, EventRecord};
 use plant_sim::run::{nominal_duration_s, open_recorder_with, RecordingAbout, RunSummary};
+use plant_sim::stats::LoopStats;
 use plant_sim::PlantTick;
 use recordings::TimingRecord;
 use scenario::{Mode, Scenario};

@@ -183,9 +183,10 @@ impl JointState {
 
 /// End-effector wrench of tick `tick`, as a 6-axis force/torque sensor reports it (plant → controller).
 ///
-/// This is the wrench the environment (strip) exerts ON the tool, minus the F_e of (7.1) and of the
-/// controller's law (the wrench the robot exerts on the strip): pressing the strip down gives a
-/// force along +y_task (= +z_base) on the tool. See messages/README.md, Frames and signs.
+/// This is the wrench the strip exerts ON the tool, what a wrist sensor measures: −F_e, where F_e
+/// (thesis (7.1), the controller's law) is always the wrench the tool exerts on the strip.
+/// Pressing the strip down gives a force along +y_task (= +z_base) on the tool.
+/// See messages/README.md, "Frames and signs".
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("rig::Wrench")]
 #[repr(C)]
@@ -194,9 +195,9 @@ pub struct Wrench {
     /// [`WrenchFrame`] as u32.
     pub frame: u32,
     pub tick: u64,
-    /// Force on the tool, N.
+    /// Force on the tool (−F_e), N.
     pub force: [f64; 3],
-    /// Torque on the tool about the reference point, N m.
+    /// Torque on the tool about the reference point (−F_e's moment), N m.
     pub torque: [f64; 3],
 }
 
@@ -229,9 +230,9 @@ pub struct ControllerDiagnostics {
     /// 1 while the force law is active along task y, 0 in pure motion control.
     pub force_control_active: u32,
     pub tick: u64,
-    /// Force set-point along task y on the strip, N (negative = pressing, thesis sign).
+    /// Force set-point along task y on the strip (F_r), N (negative = pressing, thesis sign).
     pub force_ref_n: f64,
-    /// Measured contact force along task y on the strip, N (same sign as `force_ref_n`).
+    /// Measured force on the strip along task y (F_e's task-y component), N (same sign as `force_ref_n`).
     pub force_meas_n: f64,
     /// TCP position reference in the task frame, m.
     pub pos_ref_task_m: [f64; 3],

@@ -35,8 +35,10 @@ use std::sync::Arc;
 use nalgebra::{Matrix3, Vector3};
 use recordings::{StripRecord, MAX_CENTRELINE};
 use robot::Vec6;
-use scenario::{Scenario, STRIP_TOP_HEIGHT_M};
+use scenario::Scenario;
 use strip::{CbBoundary, StripModel, StripParams, Substrate};
+
+use scenario::geometry::{TaskFrame, STRIP_TOP_HEIGHT_M};
 
 /// z_a grid spacing of the wheel-direction table, m.
 pub const TABLE_STEP_M: f64 = 0.05e-3;
@@ -64,13 +66,11 @@ pub fn strip_params(s: &Scenario) -> StripParams {
     }
 }
 
-/// Where the strip lies and how the wheel touches it (SI, base frame of DESIGN section 3).
+/// Where the strip lies and how the wheel touches it (SI, DESIGN section 3).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactGeometry {
-    /// Base x of task z = 0, base y of task x = 0, base z of the strip bottom.
-    pub strip_start_x_m: f64,
-    pub strip_y_m: f64,
-    pub table_z_m: f64,
+    /// The strip's task frame in the base (`scenario::geometry`).
+    pub task: TaskFrame,
     pub wheel_radius_m: f64,
     /// Penalty stiffness (N/m) and damping (N s/m).
     pub stiffness_n_per_m: f64,
@@ -80,9 +80,7 @@ pub struct ContactGeometry {
 impl ContactGeometry {
     pub fn from_scenario(s: &Scenario) -> Self {
         ContactGeometry {
-            strip_start_x_m: s.placement.strip_start_x_m,
-            strip_y_m: s.placement.strip_y_m,
-            table_z_m: s.placement.table_z_m,
+            task: TaskFrame::from_scenario(s),
             wheel_radius_m: s.robot.wheel_radius_mm * 1e-3,
             stiffness_n_per_m: s.contact.stiffness_n_per_m,
             damping_ns_per_m: s.contact.damping_ns_per_m,
@@ -382,16 +380,17 @@ impl WheelTable {
     }
 }
 
-/// Contact of one substep, as the robot sees it.
+/// Contact of one substep, as the robot sees it: the wrench the strip exerts ON the tool, −F_e
+/// (messages/README.md, "Frames and signs").
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct ContactWrench {
+pub struct WrenchOnTool {
     /// Force and torque ON the tool about the TCP, base axes.
     pub force_base_n: Vector3<f64>,
     pub torque_base_nm: Vector3<f64>,
 }
 
-impl ContactWrench {
-    /// As a 6-vector (force, torque) for `Jᵀ W` with the TCP Jacobian.
+impl WrenchOnTool {
+    /// As a 6-vector (force, torque) for `Jᵀ W` = `−Jᵀ F_e` with the TCP Jacobian.
     pub fn as_vec6(&self) -> Vec6 {
         let (f, m) = (self.force_base_n, self.torque_base_nm);
         Vec6::new(f.x, f.y, f.z, m.x, m.y, m.z)
@@ -533,7 +532,7 @@ pub struct StripContact {
     z_a_m: f64,
     delta_prev_m: f64,
     force_y_n: f64,
-    wrench: ContactWrench,
+    wrench: WrenchOnTool,
 }
 
 impl StripContact {
@@ -559,7 +558,7 @@ impl StripContact {
             z_a_m: 0.0,
             delta_prev_m: f64::NEG_INFINITY,
             force_y_n: 0.0,
-            wrench: ContactWrench::default(),
+            wrench: WrenchOnTool::default(),
         }
     }
 
@@ -593,15 +592,16 @@ impl StripContact {
     /// One substep: contact force from the wheel state at the substep start (TCP = wheel centre
     /// position, tool orientation and TCP twist (v, ω), base frame), strip advanced by h. Returns
     /// the wrench on the tool to hold over the substep.
-    pub fn substep(&mut self, tcp_pos_base: &Vector3<f64>, rot_base_tool: &Matrix3<f64>, twist_base: &Vec6) -> ContactWrench {
+    pub fn substep(&mut self, tcp_pos_base: &Vector3<f64>, rot_base_tool: &Matrix3<f64>, twist_base: &Vec6) -> WrenchOnTool {
         let h = self.tables.h_s;
         let (p_low, d) = self.lowest_point(tcp_pos_base, rot_base_tool);
         let v = Vector3::new(twist_base[0], twist_base[1], twist_base[2]);
         let w = Vector3::new(twist_base[3], twist_base[4], twist_base[5]);
         let v_low = v + w.cross(&(d * self.geo.wheel_radius_m));
-        // Task coordinates: z along the strip (base x), y up (base z).
-        self.z_a_m = p_low.x - self.geo.strip_start_x_m;
-        let y_wheel_end = (p_low.z - self.geo.table_z_m) + v_low.z * h;
+        // Task coordinates: z along the strip, y up (the strip normal).
+        let p_low_task = self.geo.task.point_to_task(&p_low);
+        self.z_a_m = p_low_task.z;
+        let y_wheel_end = p_low_task.y + self.geo.task.vector_to_task(&v_low).y * h;
 
         let t = &self.tables.table;
         let (g, s) = t.locate(self.z_a_m);
@@ -634,19 +634,19 @@ impl StripContact {
         }
         // The wheel gets +p along base z at its lowest point.
         let force = Vector3::new(0.0, 0.0, p);
-        self.wrench = ContactWrench { force_base_n: force, torque_base_nm: (d * self.geo.wheel_radius_m).cross(&force) };
+        self.wrench = WrenchOnTool { force_base_n: force, torque_base_nm: (d * self.geo.wheel_radius_m).cross(&force) };
         self.wrench
     }
 
     /// Wrench of the last substep on the tool as a flange-mounted sensor reports it
-    /// (`messages::WrenchFrame::SensorAtTcp`: tool/flange axes, about the TCP).
-    pub fn wrench_sensor(&self, rot_base_tool: &Matrix3<f64>) -> ([f64; 3], [f64; 3]) {
+    /// (`messages::WrenchFrame::SensorAtTcp`: tool/flange axes, about the TCP), −F_e.
+    pub fn wrench_on_tool_sensor(&self, rot_base_tool: &Matrix3<f64>) -> ([f64; 3], [f64; 3]) {
         let rt = rot_base_tool.transpose();
         ((rt * self.wrench.force_base_n).into(), (rt * self.wrench.torque_base_nm).into())
     }
 
-    /// Last substep's wrench on the tool (base axes, about the TCP).
-    pub fn wrench(&self) -> ContactWrench {
+    /// Last substep's wrench on the tool (base axes, about the TCP), −F_e.
+    pub fn wrench_on_tool(&self) -> WrenchOnTool {
         self.wrench
     }
 
@@ -655,7 +655,8 @@ impl StripContact {
         self.force_y_n < 0.0
     }
 
-    /// Contact force on the strip along +y (N, pressing negative) of the last substep.
+    /// Force of the wheel on the strip along task y of the last substep, N: F_e's task-y
+    /// component, negative when pressing (messages/README.md, "Frames and signs").
     pub fn contact_force_n(&self) -> f64 {
         self.force_y_n
     }
@@ -753,7 +754,8 @@ mod tests {
 
     /// TCP (wheel centre) position and tool-down orientation for the wheel's lowest point at task (z, y).
     fn tcp_at(g: &ContactGeometry, z: f64, y_low: f64) -> (Vector3<f64>, Matrix3<f64>) {
-        let pose = robot::scenario_tcp_pose(g.strip_start_x_m + z, g.strip_y_m, g.table_z_m + y_low + g.wheel_radius_m);
+        let p = g.task.point_to_base(&Vector3::new(0.0, y_low + g.wheel_radius_m, z));
+        let pose = robot::tool_down_pose(p.x, p.y, p.z);
         (pose.translation.vector, pose.rotation.to_rotation_matrix().into_inner())
     }
 
@@ -820,7 +822,7 @@ mod tests {
             assert!((r.top_centreline_uy_m[k] - want).abs() < 1e-4 * scale, "crest node {k}: {} vs {want}", r.top_centreline_uy_m[k]);
         }
         // The wrench on the tool: +p along base z, no moment about the wheel centre.
-        let wr = c.wrench();
+        let wr = c.wrench_on_tool();
         assert!((wr.force_base_n.z - p).abs() < 1e-12 && wr.torque_base_nm.norm() < 1e-12 * p);
     }
 
@@ -981,7 +983,7 @@ mod tests {
         let c = run_hold(&model, 1e-4, 0.004, STRIP_TOP_HEIGHT_M + 0.5e-3, 0.05);
         assert_eq!(c.contact_force_n(), 0.0);
         assert!(!c.in_contact());
-        assert_eq!(c.wrench().force_base_n, Vector3::zeros());
+        assert_eq!(c.wrench_on_tool().force_base_n, Vector3::zeros());
     }
 
     /// Approach at 10 mm/s, touch, press 0.3 mm, lift off again; halving the substep changes the

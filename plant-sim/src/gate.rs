@@ -410,7 +410,7 @@ mod tests {
     #[test]
     fn safe_stop_damping_is_stable_as_a_held_torque() {
         let robot = robot::Robot::irb2400_with_tool(robot::Tool::default());
-        let m = robot.mass_matrix(&robot::scenario_ik_seed()).diagonal();
+        let m = robot.mass_matrix(&robot::ik_seed_tool_down()).diagonal();
         let d = safe_stop_damping(20.0, &m, 1e-3);
         for i in 0..6 {
             let pole = 1.0 - d[i] * 1e-3 / m[i];

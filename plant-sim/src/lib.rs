@@ -10,11 +10,14 @@ pub mod gate;
 pub mod histogram;
 pub mod launcher;
 pub mod limits;
+pub mod loop_lockstep;
 pub mod loop_rt;
 pub mod physics;
 pub mod probe;
 pub mod rt;
 pub mod run;
+mod stack_text;
+pub mod stats;
 pub mod tick;
 
 pub use tick::PlantTick;

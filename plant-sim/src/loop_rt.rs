@@ -1,17 +1,14 @@
-//! The plant's tick loop (DESIGN section 6), on a plain OS thread.
+//! The plant's real-time loop (DESIGN section 6), on a plain OS thread, and the parts of a tick
+//! every port-driven loop shares: the ports (publish the state, collect the answers, choose one
+//! with the arbiter), the tick itself ([`PlantTick`]) and the recorder hand-off. The lockstep
+//! loop (`loop_lockstep.rs`) drives the same parts with its own waits.
 //!
 //! Real-time mode, tick k: sleep until the absolute deadline t_k (CLOCK_MONOTONIC, TIMER_ABSTIME),
 //! publish state and wrench of tick k, wait on the torque listener's fd (`ppoll`) until
-//! budget after the publish (at most until t_k+1) for the torque answering tick k, let the [`Gate`] decide what to apply, integrate
-//! [t_k, t_k + T), record. If the thread falls behind by more than a period (a VM stall), the
-//! missed deadlines are skipped and counted as overruns instead of being run in a burst.
-//!
-//! Lockstep mode: no sleeping; the plant waits for every torque up to the watchdog. Before the first
-//! controller answers, tick 0 is republished every few milliseconds (a late-joining controller
-//! gets no history) and the simulation does not advance, so identical inputs give identical
-//! runs. When the watchdog expires the controller is presumed gone: the plant counts the miss and
-//! continues paced in real time (budget waits), so the safe stop is reached after
-//! `max_consecutive_misses` periods and a returning controller can take over.
+//! budget after the publish (at most until t_k+1) for the torque answering tick k, let the
+//! [`PlantTick`] apply it (gate, physics, limits), record. If the thread falls behind by more than
+//! a period (a VM stall), the missed deadlines are skipped and counted as overruns instead of
+//! being run in a burst.
 //!
 //! Per tick there is no allocation, no lock, no blocking I/O and no logging: ticks and events go
 //! to the recorder's wait-free queue; only rare events (miss streak start, safe stop, takeover,
@@ -22,14 +19,15 @@ use std::time::{Duration, Instant};
 
 use messages::liveness::PeerWatch;
 use messages::ports::{Answers, PlantPorts};
-use messages::PlantStatus;
+use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench};
 use scenario::Mode;
 
 use crate::arbiter::{Arbiter, ArbiterEvents, TakeoverReason};
-use crate::histogram::Histogram;
 use crate::recording::{ControllerStamps, EventKind, EventRecord, Recorder, StageStamps, TimingRecord};
 use crate::rt;
-use crate::tick::{PlantTick, StackText};
+use crate::stack_text::StackText;
+use crate::stats::LoopStats;
+use crate::tick::{PlantTick, TickOutcome};
 
 /// Loop parameters.
 #[derive(Debug, Clone, Copy)]
@@ -42,83 +40,6 @@ pub struct LoopParams {
     pub n_ticks: u64,
     /// Busy-wait this long for the torque before sleeping in `ppoll` (0 = never spin).
     pub spin_ns: u64,
-}
-
-/// Statistics of a run, kept in fixed-size histograms.
-#[derive(Debug, Clone)]
-pub struct LoopStats {
-    pub ticks: u64,
-    pub misses: u64,
-    pub safe_stops: u64,
-    pub refusals: u64,
-    pub overruns: u64,
-    /// Publish → torque received, for ticks answered in time.
-    pub round_trip: Histogram,
-    /// |actual period − nominal period| between consecutive publishes (real-time pacing only).
-    pub jitter: Histogram,
-    /// Plant work per tick: wake → publish plus torque received → tick integrated and recorded.
-    pub plant_compute: Histogram,
-    /// Controller compute as it reports it in its diagnostics.
-    pub controller_compute: Histogram,
-    pub wall_s: f64,
-    pub sim_s: f64,
-    /// Wall and simulated time from the first controller answer to the end (the speed factor's
-    /// basis: start-up waits for the controller are excluded).
-    pub active_wall_s: f64,
-    pub active_sim_s: f64,
-    pub stopped_by_signal: bool,
-    pub reflexes: u64,
-    /// Answers from publishers other than the active controller, ignored.
-    pub foreign_answers: u64,
-    /// First tick of a safe stop, a reflex, a refused torque (the exit status' story).
-    pub first_safe_stop_tick: Option<u64>,
-    pub first_reflex_tick: Option<u64>,
-    pub first_refusal_tick: Option<u64>,
-    /// The launcher reported the controller process ended, or its node was seen dead.
-    pub controller_ended: bool,
-}
-
-impl LoopStats {
-    /// The plant's counters at the end of a run (misses, safe stops, refusals, reflexes, their
-    /// first ticks, simulated time).
-    pub fn count_plant(&mut self, plant: &PlantTick) {
-        let g = plant.gate();
-        self.misses = g.total_misses();
-        self.safe_stops = g.safe_stops();
-        self.refusals = g.refusals();
-        self.reflexes = g.reflexes();
-        let f = plant.first_ticks();
-        self.first_safe_stop_tick = f.safe_stop;
-        self.first_reflex_tick = f.reflex;
-        self.first_refusal_tick = f.refusal;
-        self.sim_s = plant.physics().time_s();
-    }
-
-    /// A run's statistics before its first tick.
-    pub fn empty() -> LoopStats {
-        LoopStats {
-            ticks: 0,
-            misses: 0,
-            safe_stops: 0,
-            refusals: 0,
-            overruns: 0,
-            round_trip: Histogram::for_latency(),
-            jitter: Histogram::for_latency(),
-            plant_compute: Histogram::for_latency(),
-            controller_compute: Histogram::for_latency(),
-            wall_s: 0.0,
-            sim_s: 0.0,
-            active_wall_s: 0.0,
-            active_sim_s: 0.0,
-            stopped_by_signal: false,
-            reflexes: 0,
-            foreign_answers: 0,
-            first_safe_stop_tick: None,
-            first_reflex_tick: None,
-            first_refusal_tick: None,
-            controller_ended: false,
-        }
-    }
 }
 
 /// Everything the loop touches.
@@ -139,23 +60,171 @@ pub struct PlantLoop<'a> {
 /// Longest single sleep while waiting for a torque (see `wait_for_answers`).
 const WAIT_SLICE: Duration = Duration::from_millis(1);
 
-/// How long a lockstep plant republishes the waiting state while no controller has answered yet.
-const LOCKSTEP_REPUBLISH: Duration = Duration::from_millis(5);
+/// What a run carries from tick to tick: clocks, pacing, the answers buffer, statistics.
+pub(crate) struct RunState {
+    pub(crate) stats: LoopStats,
+    pub(crate) answers: Answers,
+    /// The controller's end was reported (and not yet followed by a takeover).
+    pub(crate) gone_reported: bool,
+    /// (tick, overruns) of the last overrun log line: at most one per second of ticks.
+    last_overrun_log: Option<(u64, u64)>,
+    ticks_per_s: u64,
+    /// One reference instant for both clocks: Instant is CLOCK_MONOTONIC on Linux.
+    origin: Instant,
+    origin_ns: u64,
+    origin_wall_ns: u64,
+    /// Next deadline of the paced ticks, CLOCK_MONOTONIC ns.
+    pub(crate) next_deadline_ns: u64,
+    last_publish_ns: u64,
+    /// (publish time, tick) of the first tick a controller answered.
+    first_answer: Option<(u64, u64)>,
+}
+
+impl RunState {
+    /// The instant of a CLOCK_MONOTONIC time.
+    pub(crate) fn at(&self, ns: u64) -> Instant {
+        self.origin + Duration::from_nanos(ns.saturating_sub(self.origin_ns))
+    }
+}
+
+/// A tick's state and wrench as published, with the stamps the record needs (CLOCK_MONOTONIC
+/// ns unless named wall).
+pub(crate) struct Published {
+    pub(crate) state: JointState,
+    pub(crate) wrench: Wrench,
+    deadline_ns: u64,
+    skipped: u64,
+    wake_ns: u64,
+    publish_wall_ns: u64,
+    /// When the state went out; a lockstep start-up that republishes moves it to the last time.
+    pub(crate) publish_ns: u64,
+    published_ns: u64,
+    /// Since the previous tick's publish (0 at the first).
+    period_ns: u64,
+    /// Wake → publish, the plant's work before the wait.
+    pre_ns: u64,
+}
+
+impl Published {
+    /// End of the torque budget: `budget_ns` after the publish (a plant that woke late must not
+    /// blame the controller), but never past the next tick's deadline.
+    pub(crate) fn budget_end_ns(&self, p: &LoopParams) -> u64 {
+        (self.publish_ns + p.budget_ns).min(self.deadline_ns + p.period_ns)
+    }
+}
+
+/// What the tick applied, with the answer it chose and when that came.
+pub(crate) struct Applied {
+    pub(crate) torque: Option<JointTorque>,
+    pub(crate) outcome: TickOutcome,
+    recv_ns: u64,
+    recv_wall_ns: u64,
+    diag: Option<ControllerDiagnostics>,
+    late_diag: Option<ControllerDiagnostics>,
+}
 
 impl PlantLoop<'_> {
-    fn event(&mut self, tick: u64, sim_time_s: f64, kind: EventKind, text: &str) {
+    pub(crate) fn event(&mut self, tick: u64, sim_time_s: f64, kind: EventKind, text: &str) {
         if let Some(r) = self.recorder.as_deref_mut() {
             r.record_event(&EventRecord::new(tick, sim_time_s, kind, text));
         }
     }
 
+    fn sim_time_s(&self, tick: u64) -> f64 {
+        tick as f64 * self.params.period_ns as f64 * 1e-9
+    }
+
+    /// A run starting now: the paced grid's first deadline one period ahead (the probe's grid
+    /// placed against it).
+    pub(crate) fn start(&self) -> RunState {
+        let p = self.params;
+        let (origin, origin_ns, origin_wall_ns) = (Instant::now(), rt::now_mono_ns(), rt::now_wall_ns());
+        let next_deadline_ns = origin_ns + p.period_ns;
+        if let Some(probe) = self.probe {
+            probe.set_grid(next_deadline_ns);
+        }
+        RunState {
+            stats: LoopStats::empty(),
+            answers: Answers::default(),
+            gone_reported: false,
+            last_overrun_log: None,
+            ticks_per_s: 1_000_000_000 / p.period_ns.max(1),
+            origin,
+            origin_ns,
+            origin_wall_ns,
+            next_deadline_ns,
+            last_publish_ns: 0,
+            first_answer: None,
+        }
+    }
+
+    /// Real-time pacing: the deadline of `tick`, skipping ahead after a stall (the skipped
+    /// periods counted as overruns and recorded), slept until. Returns (deadline, periods
+    /// skipped now).
+    pub(crate) fn pace(&mut self, run: &mut RunState, tick: u64) -> (u64, u64) {
+        let p = self.params;
+        let now = rt::now_mono_ns();
+        let (deadline, skipped) = skip_ahead(now, run.next_deadline_ns, p.period_ns);
+        if skipped > 0 {
+            let late_us = (now - run.next_deadline_ns) / 1000;
+            run.next_deadline_ns = deadline;
+            run.stats.overruns += skipped;
+            let mut s = StackText::new();
+            let _ = write!(s, "tick {tick}: loop {late_us} us late, skipped {skipped} periods");
+            // Overruns come in bursts on a stalling host: each is recorded in `/events`, but this
+            // SCHED_FIFO thread writes at most one log line per second of ticks about them.
+            if run.last_overrun_log.is_none_or(|(l, _)| tick >= l + run.ticks_per_s) {
+                let since = run.last_overrun_log.map_or(0, |(_, n)| n);
+                tracing::warn!("{} ({} overrun(s) since the last such line)", s.as_str(), run.stats.overruns - since);
+                run.last_overrun_log = Some((tick, run.stats.overruns));
+            }
+            self.event(tick, self.sim_time_s(tick), EventKind::Info, s.as_str());
+        }
+        rt::sleep_until_mono_ns(run.next_deadline_ns);
+        (run.next_deadline_ns, skipped)
+    }
+
+    /// Publish state and wrench of `tick` (due at `deadline_ns`), and empty the answers buffer
+    /// for its answers.
+    pub(crate) fn publish(&mut self, run: &mut RunState, tick: u64, deadline_ns: u64, skipped: u64) -> Published {
+        let wake_ns = rt::now_mono_ns();
+        let (state, wrench) = self.plant.outputs();
+        let publish_wall_ns = rt::now_wall_ns();
+        let publish_ns = rt::now_mono_ns();
+        if let Err(e) = self.ports.publish(&state, &wrench) {
+            tracing::error!("{e}");
+            self.event(tick, self.sim_time_s(tick), EventKind::Fault, "publishing the state failed");
+        }
+        let published_ns = rt::now_mono_ns();
+        let period_ns = if run.last_publish_ns == 0 { 0 } else { publish_ns - run.last_publish_ns };
+        if self.params.mode == Mode::Realtime && run.last_publish_ns != 0 {
+            run.stats.jitter.record(period_ns.abs_diff(self.params.period_ns));
+        }
+        run.last_publish_ns = publish_ns;
+        run.answers.clear();
+        Published {
+            state,
+            wrench,
+            deadline_ns,
+            skipped,
+            wake_ns,
+            publish_wall_ns,
+            publish_ns,
+            published_ns,
+            period_ns,
+            pre_ns: publish_ns - wake_ns,
+        }
+    }
+
+    /// The active controller's node is known dead.
+    fn active_gone(&self) -> bool {
+        self.arbiter.active().is_some_and(|a| self.watch.is_some_and(|w| w.is_gone(a)))
+    }
+
     /// Collect the answers to `tick` into `answers` until the arbiter calls the tick settled (the
     /// active controller answered, see [`Arbiter::settled`]) or `deadline` passes.
-    fn wait_for_answers(&self, tick: u64, deadline: Instant, answers: &mut Answers) {
-        let settled = |answers: &Answers| {
-            let gone = self.arbiter.active().is_some_and(|a| self.watch.is_some_and(|w| w.is_gone(a)));
-            self.arbiter.settled(answers, gone)
-        };
+    pub(crate) fn wait_for_answers(&self, tick: u64, deadline: Instant, answers: &mut Answers) {
+        let settled = |answers: &Answers| self.arbiter.settled(answers, self.active_gone());
         // Optional busy-wait first: a halted vCPU takes tens of µs to wake on the controller's
         // notification; polling the subscriber (shared memory, no syscall) sees the torque at once.
         if self.params.spin_ns > 0 {
@@ -182,8 +251,7 @@ impl PlantLoop<'_> {
             if settled(answers) {
                 return;
             }
-            let gone = self.arbiter.active().is_some_and(|a| self.watch.is_some_and(|w| w.is_gone(a)));
-            if rt::stop_requested() || rt::controller_end_pending() || gone {
+            if rt::stop_requested() || rt::controller_end_pending() || self.active_gone() {
                 return;
             }
             let now = Instant::now();
@@ -222,230 +290,152 @@ impl PlantLoop<'_> {
         }
     }
 
-    /// Run until `n_ticks` ticks are integrated or a stop signal arrives.
-    pub fn run(&mut self) -> LoopStats {
+    /// After the wait: choose the answer to obey (the arbiter), put a controller that is gone
+    /// into safe stop, and let the plant apply the torque and integrate the tick. None: a stop
+    /// signal came and no torque, so the run ends before this tick is integrated.
+    pub(crate) fn apply(&mut self, run: &mut RunState, tick: u64, pb: &Published) -> Option<Applied> {
+        let sim_t = self.sim_time_s(tick);
+        let active_gone = self.active_gone();
+        let (torque, arb_events) = self.arbiter.choose(&run.answers, active_gone, tick);
+        if let Some(w) = self.watch {
+            w.follow(self.arbiter.active().unwrap_or(0));
+        }
+        self.report_arbiter(tick, sim_t, &arb_events);
+        let recv_ns = rt::now_mono_ns();
+        if torque.is_some() && run.first_answer.is_none() {
+            run.first_answer = Some((pb.publish_ns, tick));
+        }
+        let recv_wall_ns = if torque.is_some() { rt::now_wall_ns() } else { 0 };
+        let (diag, late_diag) = self.ports.receive_diagnostics_from(self.watch.map_or(0, |w| w.companion()), tick);
+
+        // A controller that is gone (rig reports its process ended, or the watcher saw its
+        // node dead) and was not replaced: safe stop now, not after max_consecutive_misses.
+        let ended = rt::take_controller_end();
+        let still_gone = arb_events.takeover.is_none() && torque.is_none() && active_gone;
+        if ended.is_some() || (still_gone && !run.gone_reported) {
+            run.stats.controller_ended = true;
+            run.gone_reported = true;
+            let mut s = StackText::new();
+            let _ = match ended {
+                Some(end) => write!(s, "tick {tick}: controller process ended ({end})"),
+                None => write!(s, "tick {tick}: the active controller's node is dead"),
+            };
+            tracing::error!("{}", s.as_str());
+            self.event(tick, sim_t, EventKind::ControllerEnded, s.as_str());
+            self.plant.controller_gone(self.recorder.as_deref_mut());
+        }
+        if arb_events.takeover.is_some() {
+            run.gone_reported = false;
+        }
+        // Stopping (after the controller-end report above is recorded).
+        if rt::stop_requested() && torque.is_none() {
+            run.stats.stopped_by_signal = true;
+            return None;
+        }
+        let outcome = self.plant.advance(torque.as_ref(), self.recorder.as_deref_mut());
+        Some(Applied { torque, outcome, recv_ns, recv_wall_ns, diag, late_diag })
+    }
+
+    /// Hand the tick to the recorder with its timing (`budget_end_ns`: when the wait for the
+    /// torque ended at the latest; `budget_ns`: the budget it had), and count it.
+    pub(crate) fn record(&mut self, run: &mut RunState, pb: &Published, a: &Applied, budget_end_ns: u64, budget_ns: u64) {
+        let decision = a.outcome.decision;
+        let round_trip_ns = if a.torque.is_some() { a.recv_ns - pb.publish_ns } else { 0 };
+        if a.torque.is_some() && !decision.missed {
+            run.stats.round_trip.record(round_trip_ns);
+        }
+        if let Some(d) = a.diag.as_ref() {
+            run.stats.controller_compute.record(d.compute_time_ns);
+        }
+        let timing = TimingRecord {
+            publish_wall_ns: pb.publish_wall_ns,
+            torque_receive_wall_ns: a.recv_wall_ns,
+            round_trip_ns,
+            period_ns: pb.period_ns,
+            missed: decision.missed,
+            plant_compute_ns: 0,
+            controller_compute_ns: a.diag.map_or(0, |d| d.compute_time_ns),
+            stages: None,
+        };
+        let mut rec = crate::tick::tick_record(pb.state, pb.wrench, &a.outcome, a.diag, timing);
+        let done_ns = rt::now_mono_ns();
+        let plant_ns = pb.pre_ns + (done_ns - a.recv_ns);
+        rec.timing.plant_compute_ns = plant_ns;
+        let deadline_ns = pb.deadline_ns;
+        let rel = |t: u64| t as i64 - deadline_ns as i64;
+        let (probe_late_ns, probe_at_ns) = self.probe.map_or((0, 0), |p| p.take());
+        let origin_wall_ns = run.origin_wall_ns;
+        let since_start_us = |wall: u64| if wall == 0 { 0.0 } else { (wall as i64 - origin_wall_ns as i64) as f64 * 1e-3 };
+        rec.timing.stages = Some(StageStamps {
+            deadline_since_start_ns: deadline_ns.saturating_sub(run.origin_ns),
+            publish_since_start_us: since_start_us(pb.publish_wall_ns),
+            torque_receive_since_start_us: since_start_us(a.recv_wall_ns),
+            skipped_periods: pb.skipped.min(u64::from(u32::MAX)) as u32,
+            plant_woke_ns: rel(pb.wake_ns),
+            state_published_ns: rel(pb.published_ns),
+            budget_end_ns: rel(budget_end_ns),
+            torque_budget_ns: budget_ns,
+            torque_received_ns: rel(a.recv_ns),
+            plant_done_ns: rel(done_ns),
+            answered: a.torque.is_some(),
+            refused: decision.refused.is_some(),
+            controller: a.diag.and_then(|d| ControllerStamps::from_diag(&d, deadline_ns)),
+            late: a.late_diag.and_then(|d| Some((d.tick, ControllerStamps::from_diag(&d, deadline_ns)?))),
+            probe: self.probe.is_some(),
+            probe_late_ns,
+            probe_stall_from_ns: if probe_late_ns > 0 { rel(probe_at_ns) } else { 0 },
+            probe_period_ns: self.probe.map_or(0, |p| p.period_ns()),
+        });
+        run.stats.plant_compute.record(plant_ns);
+        if let Some(r) = self.recorder.as_deref_mut() {
+            // Applied torque in the record, plus the controller's own answer (for replay).
+            r.record_tick_commanded(&rec, a.torque.as_ref());
+        }
+    }
+
+    /// The end of a run after `tick` ticks: the statistics, and the goodbye (the last state says
+    /// ShuttingDown so controllers exit).
+    pub(crate) fn finish(&mut self, mut run: RunState, tick: u64) -> LoopStats {
         let p = self.params;
-        let mut stats = LoopStats::empty();
-        let mut answers = Answers::default();
-        let mut gone_reported = false;
-        // Overruns come in bursts on a stalling host: each is recorded in `/events`, but this
-        // SCHED_FIFO thread writes at most one log line per second of ticks about them.
-        let mut last_overrun_log: Option<(u64, u64)> = None;
-        let ticks_per_s = 1_000_000_000 / p.period_ns.max(1);
-        // One reference instant for both clocks: Instant is CLOCK_MONOTONIC on Linux.
-        let (origin, origin_ns, origin_wall_ns) = (Instant::now(), rt::now_mono_ns(), rt::now_wall_ns());
-        let at = |ns: u64| origin + Duration::from_nanos(ns.saturating_sub(origin_ns));
-        let mut next_deadline_ns = origin_ns + p.period_ns;
-        if let Some(probe) = self.probe {
-            probe.set_grid(next_deadline_ns);
-        }
-        let mut paced = p.mode == Mode::Realtime;
-        let mut last_publish_ns: u64 = 0;
-        let mut tick: u64 = self.plant.tick();
-        // (wake time, tick) of the first tick a controller answered.
-        let mut first_answer: Option<(u64, u64)> = None;
-
-        while tick < p.n_ticks {
-            if rt::stop_requested() {
-                stats.stopped_by_signal = true;
-                break;
-            }
-            let sim_t = tick as f64 * p.period_ns as f64 * 1e-9;
-            let mut skipped_now = 0;
-            // 1. The deadline of this tick (paced modes), skipping ahead after a stall.
-            let deadline_ns = if paced {
-                let now = rt::now_mono_ns();
-                let (deadline, skipped) = skip_ahead(now, next_deadline_ns, p.period_ns);
-                if skipped > 0 {
-                    let late_us = (now - next_deadline_ns) / 1000;
-                    next_deadline_ns = deadline;
-                    stats.overruns += skipped;
-                    skipped_now = skipped;
-                    let mut s = StackText::new();
-                    let _ = write!(s, "tick {tick}: loop {late_us} us late, skipped {skipped} periods");
-                    if last_overrun_log.is_none_or(|(l, _)| tick >= l + ticks_per_s) {
-                        let since = last_overrun_log.map_or(0, |(_, n)| n);
-                        tracing::warn!("{} ({} overrun(s) since the last such line)", s.as_str(), stats.overruns - since);
-                        last_overrun_log = Some((tick, stats.overruns));
-                    }
-                    self.event(tick, sim_t, EventKind::Info, s.as_str());
-                }
-                rt::sleep_until_mono_ns(next_deadline_ns);
-                next_deadline_ns
-            } else {
-                rt::now_mono_ns()
-            };
-            let wake_ns = rt::now_mono_ns();
-
-            // 2. Publish state and wrench of this tick.
-            let (state, wrench) = self.plant.outputs();
-            let publish_wall_ns = rt::now_wall_ns();
-            let mut publish_ns = rt::now_mono_ns();
-            if let Err(e) = self.ports.publish(&state, &wrench) {
-                tracing::error!("{e}");
-                self.event(tick, sim_t, EventKind::Fault, "publishing the state failed");
-            }
-            let published_ns = rt::now_mono_ns();
-            let period_ns = if last_publish_ns == 0 { 0 } else { publish_ns - last_publish_ns };
-            if p.mode == Mode::Realtime && last_publish_ns != 0 {
-                stats.jitter.record(period_ns.abs_diff(p.period_ns));
-            }
-            last_publish_ns = publish_ns;
-            let pre_ns = publish_ns - wake_ns;
-
-            // 3. Wait for the torque of this tick (the active controller's; see the arbiter).
-            answers.clear();
-            // The budget counts from the publish (a plant that woke late must not blame the
-            // controller), but never past the next tick's deadline.
-            let mut budget_end_ns = (publish_ns + p.budget_ns).min(deadline_ns + p.period_ns);
-            let budget_ns = if paced { p.budget_ns } else { p.watchdog_ns };
-            if paced {
-                self.wait_for_answers(tick, at(budget_end_ns), &mut answers);
-            } else if self.plant.gate().status() == PlantStatus::WaitingForController {
-                // Lockstep start-up: hold tick 0 until a controller answers it.
-                while !rt::stop_requested() {
-                    self.wait_for_answers(tick, Instant::now() + LOCKSTEP_REPUBLISH, &mut answers);
-                    if !answers.is_empty() {
-                        break;
-                    }
-                    let _ = self.ports.publish(&state, &wrench);
-                    publish_ns = rt::now_mono_ns();
-                }
-            } else {
-                budget_end_ns = publish_ns + p.watchdog_ns;
-                self.wait_for_answers(tick, at(budget_end_ns), &mut answers);
-            }
-            let active_gone = self.arbiter.active().is_some_and(|a| self.watch.is_some_and(|w| w.is_gone(a)));
-            let (torque, arb_events) = self.arbiter.choose(&answers, active_gone, tick);
-            if let Some(w) = self.watch {
-                w.follow(self.arbiter.active().unwrap_or(0));
-            }
-            self.report_arbiter(tick, sim_t, &arb_events);
-            let recv_ns = rt::now_mono_ns();
-            if torque.is_some() && first_answer.is_none() {
-                first_answer = Some((publish_ns, tick));
-            }
-            let recv_wall_ns = if torque.is_some() { rt::now_wall_ns() } else { 0 };
-            let (diag, late_diag) = self.ports.receive_diagnostics_from(self.watch.map_or(0, |w| w.companion()), tick);
-
-            // 4. Decide and integrate.
-            // A controller that is gone (rig reports its process ended, or the watcher saw its
-            // node dead) and was not replaced: safe stop now, not after max_consecutive_misses.
-            let ended = rt::take_controller_end();
-            let still_gone = arb_events.takeover.is_none() && torque.is_none() && active_gone;
-            if ended.is_some() || (still_gone && !gone_reported) {
-                stats.controller_ended = true;
-                gone_reported = true;
-                let mut s = StackText::new();
-                let _ = match ended {
-                    Some(end) => write!(s, "tick {tick}: controller process ended ({end})"),
-                    None => write!(s, "tick {tick}: the active controller's node is dead"),
-                };
-                tracing::error!("{}", s.as_str());
-                self.event(tick, sim_t, EventKind::ControllerEnded, s.as_str());
-                self.plant.controller_gone(self.recorder.as_deref_mut());
-            }
-            if arb_events.takeover.is_some() {
-                gone_reported = false;
-            }
-            // Stopping (after the controller-end report above is recorded).
-            if rt::stop_requested() && torque.is_none() {
-                stats.stopped_by_signal = true;
-                break;
-            }
-            let outcome = self.plant.advance(torque.as_ref(), self.recorder.as_deref_mut());
-            let decision = outcome.decision;
-            if p.mode == Mode::Lockstep {
-                // Watchdog expired: pace in real time until a controller answers again.
-                if !paced && decision.missed && torque.is_none() {
-                    paced = true;
-                    next_deadline_ns = rt::now_mono_ns() + p.period_ns;
-                    let text = if gone_reported {
-                        "the controller is gone: pacing in real time until a controller answers"
-                    } else {
-                        "lockstep watchdog expired: pacing in real time until a controller answers"
-                    };
-                    tracing::warn!("tick {tick}: {text}");
-                    self.event(tick, sim_t, EventKind::ModeChange, text);
-                } else if paced && !decision.held {
-                    paced = false;
-                    self.event(tick, sim_t, EventKind::ModeChange, "controller answers again: back to lockstep");
-                }
-            }
-            // 5. Record.
-            let round_trip_ns = if torque.is_some() { recv_ns - publish_ns } else { 0 };
-            if torque.is_some() && !decision.missed {
-                stats.round_trip.record(round_trip_ns);
-            }
-            if let Some(d) = diag.as_ref() {
-                stats.controller_compute.record(d.compute_time_ns);
-            }
-            let timing = TimingRecord {
-                publish_wall_ns,
-                torque_receive_wall_ns: recv_wall_ns,
-                round_trip_ns,
-                period_ns,
-                missed: decision.missed,
-                plant_compute_ns: 0,
-                controller_compute_ns: diag.map_or(0, |d| d.compute_time_ns),
-                stages: None,
-            };
-            let mut rec = crate::tick::tick_record(state, wrench, &outcome, diag, timing);
-            let done_ns = rt::now_mono_ns();
-            let plant_ns = pre_ns + (done_ns - recv_ns);
-            rec.timing.plant_compute_ns = plant_ns;
-            let rel = |t: u64| t as i64 - deadline_ns as i64;
-            let (probe_late_ns, probe_at_ns) = self.probe.map_or((0, 0), |p| p.take());
-            let since_start_us = |wall: u64| if wall == 0 { 0.0 } else { (wall as i64 - origin_wall_ns as i64) as f64 * 1e-3 };
-            rec.timing.stages = Some(StageStamps {
-                deadline_since_start_ns: deadline_ns.saturating_sub(origin_ns),
-                publish_since_start_us: since_start_us(publish_wall_ns),
-                torque_receive_since_start_us: since_start_us(recv_wall_ns),
-                skipped_periods: skipped_now.min(u64::from(u32::MAX)) as u32,
-                plant_woke_ns: rel(wake_ns),
-                state_published_ns: rel(published_ns),
-                budget_end_ns: rel(budget_end_ns),
-                torque_budget_ns: budget_ns,
-                torque_received_ns: rel(recv_ns),
-                plant_done_ns: rel(done_ns),
-                answered: torque.is_some(),
-                refused: decision.refused.is_some(),
-                controller: diag.and_then(|d| ControllerStamps::from_diag(&d, deadline_ns)),
-                late: late_diag.and_then(|d| Some((d.tick, ControllerStamps::from_diag(&d, deadline_ns)?))),
-                probe: self.probe.is_some(),
-                probe_late_ns,
-                probe_stall_from_ns: if probe_late_ns > 0 { rel(probe_at_ns) } else { 0 },
-                probe_period_ns: self.probe.map_or(0, |p| p.period_ns()),
-            });
-            stats.plant_compute.record(plant_ns);
-            if let Some(r) = self.recorder.as_deref_mut() {
-                // Applied torque in the record, plus the controller's own answer (for replay).
-                r.record_tick_commanded(&rec, torque.as_ref());
-            }
-
-            tick += 1;
-            if paced {
-                next_deadline_ns += p.period_ns;
-            }
-        }
-
+        let stats = &mut run.stats;
         stats.ticks = tick;
         stats.count_plant(self.plant);
         stats.foreign_answers = self.arbiter.ignored_answers();
-        stats.wall_s = (rt::now_mono_ns() - origin_ns) as f64 * 1e-9;
-        if let Some((t0, k0)) = first_answer {
+        stats.wall_s = (rt::now_mono_ns() - run.origin_ns) as f64 * 1e-9;
+        if let Some((t0, k0)) = run.first_answer {
             stats.active_wall_s = (rt::now_mono_ns() - t0) as f64 * 1e-9;
             stats.active_sim_s = (tick - k0) as f64 * p.period_ns as f64 * 1e-9;
         }
-
-        // Goodbye: the last state says ShuttingDown so controllers exit.
         let (last, last_wrench) = self.plant.goodbye();
         let _ = self.ports.publish(&last, &last_wrench);
         let t_end = stats.sim_s;
         let mut s = StackText::new();
         let _ = write!(s, "plant stopped after {tick} ticks ({})", if stats.stopped_by_signal { "signal" } else { "duration reached" });
         self.event(tick, t_end, EventKind::Stop, s.as_str());
-        stats
+        run.stats
+    }
+
+    /// The real-time loop: run until `n_ticks` ticks are integrated or a stop signal arrives.
+    pub fn run_realtime(&mut self) -> LoopStats {
+        let p = self.params;
+        let mut run = self.start();
+        let mut tick: u64 = self.plant.tick();
+        while tick < p.n_ticks {
+            if rt::stop_requested() {
+                run.stats.stopped_by_signal = true;
+                break;
+            }
+            let (deadline_ns, skipped) = self.pace(&mut run, tick);
+            let pb = self.publish(&mut run, tick, deadline_ns, skipped);
+            // Wait for the torque of this tick (the active controller's; see the arbiter).
+            let budget_end_ns = pb.budget_end_ns(&p);
+            self.wait_for_answers(tick, run.at(budget_end_ns), &mut run.answers);
+            let Some(applied) = self.apply(&mut run, tick, &pb) else { break };
+            self.record(&mut run, &pb, &applied, budget_end_ns, p.budget_ns);
+            tick += 1;
+            run.next_deadline_ns += p.period_ns;
+        }
+        self.finish(run, tick)
     }
 }
 

@@ -1,5 +1,7 @@
 //! The plant's physics: the IRB 2400 with its applicator wheel, (7.1)
-//! `M(q) q̈ + C(q, q̇) q̇ + g(q) + Jᵀ(q) F_e = τ`, advanced one control tick at a time.
+//! `M(q) q̈ + C(q, q̇) q̇ + g(q) + Jᵀ(q) F_e = τ`, advanced one control tick at a time. F_e is the
+//! wrench the tool exerts on the strip; the contact hands over its opposite, the wrench on the
+//! tool W = −F_e, which enters as `+Jᵀ W` (messages/README.md, "Frames and signs").
 //!
 //! Integrator: `loop.substeps` equal substeps per tick (default 10, i.e. 100 µs at 1 kHz), each
 //! one step of `loop.integrator` on `(q, q̇)`: explicit midpoint (second-order Runge–Kutta, the
@@ -23,10 +25,9 @@ use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::Context;
-use robot::{Robot, Tool, Vec6};
+use robot::{Robot, Vec6};
+use scenario::geometry::{self, TaskFrame};
 use scenario::{Integrator, Scenario};
-
-pub use scenario::STRIP_TOP_HEIGHT_M;
 
 use crate::contact::StripTables;
 
@@ -35,36 +36,13 @@ pub fn substep_s(s: &Scenario) -> f64 {
     s.loop_.period_s / s.loop_.substeps as f64
 }
 
-/// The tool the scenario describes (DESIGN section 3). Starts from [`Tool::default`] (a solid
-/// cylinder on the flange z axis) with its mass and inertia scaled to `robot.tool_mass_kg`, the
-/// TCP — the wheel centre, as the scenario field says — at `robot.tool_offset_m` along flange z,
-/// the COM half-way there, and the wheel radius from `robot.wheel_radius_mm`. The wheel's lowest
-/// point lies one radius below the TCP when the tool points down.
-/// The controller builds its model with the same rule (`controller::model::tool_from_scenario`).
-pub fn tool_from_scenario(s: &Scenario) -> Tool {
-    Tool::wheel_on_bracket(s.robot.tool_mass_kg, s.robot.tool_offset_m, s.robot.wheel_radius_mm * 1e-3)
-}
-
-/// The plant robot of a scenario: arm + tool, armature and viscous friction from `[robot]`, every
+/// The plant robot of a scenario: arm + tool ([`geometry::tool`], as the controller's), armature and viscous friction from `[robot]`, every
 /// mass and inertia scaled by `robot.plant_inertia_scale` (plant/controller mismatch studies).
 pub fn plant_robot(s: &Scenario) -> Robot {
-    Robot::irb2400_with_tool(tool_from_scenario(s))
+    Robot::irb2400_with_tool(geometry::tool(s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms))
         .scaled_inertia(s.robot.plant_inertia_scale)
-}
-
-/// Start pose of the TCP (wheel centre) in the base frame: the wheel's lowest point
-/// `trajectory.approach_height_mm` above the undeformed strip top, over the strip's centre line at
-/// task z = `trajectory.z_start_mm`, tool pointing straight down.
-pub fn start_tcp_pose(s: &Scenario) -> nalgebra::Isometry3<f64> {
-    let p = &s.placement;
-    let t = &s.trajectory;
-    robot::scenario_tcp_pose(
-        p.strip_start_x_m + t.z_start_mm * 1e-3,
-        p.strip_y_m,
-        p.table_z_m + STRIP_TOP_HEIGHT_M + t.approach_height_mm * 1e-3 + s.robot.wheel_radius_mm * 1e-3,
-    )
 }
 
 /// Plant state and integrator.
@@ -78,8 +56,8 @@ pub struct Physics {
     integrator: Integrator,
     /// Simulated time of the current state, s.
     time_s: f64,
-    /// Task z of the strip start (base x), m, for the recorded wheel position.
-    strip_start_x_m: f64,
+    /// Where the strip lies, for the recorded wheel position without the strip.
+    task: TaskFrame,
     /// Strip + wheel contact (`contact.rs`); None when `strip.enabled = false`.
     contact: Option<crate::contact::StripContact>,
     /// End stops and drive torque–speed limits, applied inside every integrator stage.
@@ -87,7 +65,7 @@ pub struct Physics {
 }
 
 impl Physics {
-    /// Build the plant of a scenario, at rest in the start pose (IK of [`start_tcp_pose`]).
+    /// Build the plant of a scenario, at rest in the start pose (IK of [`geometry::start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
         let tables = if s.strip.enabled {
@@ -121,9 +99,9 @@ impl Physics {
             None => None,
         };
         let robot = plant_robot(s);
-        let target = start_tcp_pose(s);
+        let target = geometry::start_tcp_pose(s);
         let q = robot
-            .ik_tcp(&target, &robot::scenario_ik_seed())
+            .ik_tcp(&target, &robot::ik_seed_tool_down())
             .with_context(|| format!("start pose {:?} of the scenario is not reachable", target.translation.vector))?;
         let limits = crate::limits::JointLimits::irb2400(&robot.mass_matrix(&q).diagonal());
         Ok(Physics {
@@ -135,7 +113,7 @@ impl Physics {
             dt_sub_s: s.loop_.period_s / s.loop_.substeps as f64,
             integrator: s.loop_.integrator,
             time_s: 0.0,
-            strip_start_x_m: s.placement.strip_start_x_m,
+            task: TaskFrame::from_scenario(s),
             contact,
         })
     }
@@ -194,7 +172,8 @@ impl Physics {
         (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
     }
 
-    /// Magnitude of the wheel–strip contact force, N (0 without a strip).
+    /// Force of the wheel on the strip along task y, N: F_e's task-y component, negative when
+    /// pressing (0 without a strip).
     pub fn contact_force_n(&self) -> f64 {
         self.contact.as_ref().map_or(0.0, |c| c.contact_force_n())
     }
@@ -202,7 +181,7 @@ impl Physics {
     /// Advance one tick with the joint torque `tau` (N m) held constant: `substeps` steps of the
     /// integrator. With the strip, each substep first advances the contact (`contact.rs`: strip
     /// exact, force implicit at the substep end) from the TCP state at the substep start; its
-    /// wrench on the tool W enters the robot as the generalized force J(q)ᵀ W held over the substep.
+    /// wrench on the tool W = −F_e enters the robot as the generalized force J(q)ᵀ W held over the substep.
     pub fn step_tick(&mut self, tau_cmd: &Vec6) {
         let h = self.dt_sub_s;
         for _ in 0..self.substeps {
@@ -256,11 +235,11 @@ impl Physics {
         (q + (k1v + v2 * 2.0 + v3 * 2.0 + v4) * (h / 6.0), qd + (k1a + k2a * 2.0 + k3a * 2.0 + k4a) * (h / 6.0))
     }
 
-    /// End-effector wrench the strip exerts on the tool, as the sensor reports it
+    /// End-effector wrench the strip exerts on the tool (−F_e), as the sensor reports it
     /// ([`messages::WrenchFrame::SensorAtTcp`]): `(force N, torque N m)`. Zero without contact.
-    pub fn wrench(&self) -> ([f64; 3], [f64; 3]) {
+    pub fn wrench_on_tool(&self) -> ([f64; 3], [f64; 3]) {
         match &self.contact {
-            Some(c) => c.wrench_sensor(&self.robot.frames(&self.q).rot[6]),
+            Some(c) => c.wrench_on_tool_sensor(&self.robot.frames(&self.q).rot[6]),
             None => ([0.0; 3], [0.0; 3]),
         }
     }
@@ -276,14 +255,14 @@ impl Physics {
     }
 
     /// Strip outputs of the current state for the recording. Robot-only: the wheel position along
-    /// the strip (task z = base x − strip start) and zero forces.
+    /// the strip (the TCP's task z) and zero forces.
     pub fn fill_strip_record(&self, r: &mut recordings::StripRecord) {
         if let Some(c) = &self.contact {
             c.fill_record(r);
             return;
         }
         let tcp = self.robot.tcp_pose(&self.q);
-        r.wheel_z_m = tcp.translation.vector.x - self.strip_start_x_m;
+        r.wheel_z_m = self.task.point_to_task(&tcp.translation.vector).z;
         r.contact_force_n = 0.0;
         r.bottom_force_n = 0.0;
         r.max_bottom_pressure_pa = 0.0;
@@ -307,7 +286,7 @@ mod tests {
         let s = scenario();
         let p = Physics::new(&s, Path::new("/nonexistent")).unwrap();
         let tcp = p.robot().tcp_pose(&p.q());
-        let err = (tcp.translation.vector - start_tcp_pose(&s).translation.vector).norm();
+        let err = (tcp.translation.vector - geometry::start_tcp_pose(&s).translation.vector).norm();
         assert!(err < 1e-9, "TCP {err} m from the start pose");
         assert_eq!(p.qd(), Vec6::zeros());
     }

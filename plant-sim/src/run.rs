@@ -6,10 +6,11 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use scenario::{Mode, Scenario};
 
-use crate::loop_rt::{LoopParams, LoopStats, PlantLoop};
+use crate::loop_rt::{LoopParams, PlantLoop};
 use crate::physics::Physics;
 use crate::recording::{EventKind, EventRecord, Recorder, RecorderConfig};
 use crate::rt;
+use crate::stats::LoopStats;
 
 /// Nice value of the lockstep loop thread: CFS weight ~9.3x a nice-0 thread, so a CPU-bound job
 /// sharing the lockstep CPU takes ~10 % of it instead of ~50 % (measured with a concurrent rustc
@@ -321,7 +322,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         (stats, Some(es))
     } else {
         let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode);
-        let stats = PlantLoop {
+        let mut plant_loop = PlantLoop {
             ports: &ports,
             plant: &mut plant,
             recorder: recorder.as_mut(),
@@ -329,8 +330,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
             arbiter: &mut arbiter,
             watch: Some(&watch),
             probe: probe.as_ref().map(|p| &*p.latest),
-        }
-        .run();
+        };
+        let stats = match mode {
+            Mode::Realtime => plant_loop.run_realtime(),
+            Mode::Lockstep => plant_loop.run_lockstep(),
+        };
         (stats, None)
     };
     let probe = probe.map(crate::probe::Probe::finish);
@@ -354,7 +358,6 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
 /// model's top surface (`recordings::scene`).
 fn scene_config(s: &scenario::Scenario, contact: Option<&crate::contact::StripContact>) -> recordings::scene::SceneConfig {
     use recordings::scene::{SceneConfig, StripGeometry};
-    let p = &s.placement;
     let params = crate::contact::strip_params(s);
     let strip = contact.map(|c| {
         let top = c.top_xyz_m();
@@ -374,8 +377,8 @@ fn scene_config(s: &scenario::Scenario, contact: Option<&crate::contact::StripCo
     });
     SceneConfig {
         rate_hz: s.recording.scene_rate_hz,
-        tool: crate::physics::tool_from_scenario(s),
-        task_in_base: SceneConfig::task_frame(p.strip_start_x_m, p.strip_y_m, p.table_z_m),
+        tool: scenario::geometry::tool(s),
+        task_in_base: scenario::geometry::TaskFrame::from_scenario(s).pose_in_base(),
         strip,
     }
 }

@@ -6,7 +6,7 @@
 //! `rig run --in-process` and `rig sweep` drive this one type: the loops add only pacing, ports
 //! and the recorder hand-off.
 //!
-//! Per tick: no allocation, no lock; rare events (miss streak, safe stop, reflex, end stop,
+//! Per tick: no allocation (`tests/tests/no_alloc.rs` counts), no lock; rare events (miss streak, safe stop, reflex, end stop,
 //! refusal, controller change) go to the recorder's wait-free queue and, rate-limited, the log.
 
 use std::fmt::Write as _;
@@ -18,6 +18,7 @@ use crate::gate::{Decision, Gate, GateConfig};
 use crate::limits::ReflexLimits;
 use crate::physics::Physics;
 use crate::recording::{EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
+use crate::stack_text::StackText;
 
 /// What one [`PlantTick::advance`] applied and measured.
 #[derive(Debug, Clone, Copy)]
@@ -165,7 +166,7 @@ impl PlantTick {
     }
 
     fn wrench(&self) -> Wrench {
-        let (force, torque) = self.physics.wrench();
+        let (force, torque) = self.physics.wrench_on_tool();
         Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick: self.tick, force, torque }
     }
 
@@ -348,32 +349,5 @@ const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics::zeroed(0);
 pub(crate) fn event(recorder: Option<&mut Recorder>, tick: u64, t: f64, kind: EventKind, text: &str) {
     if let Some(r) = recorder {
         r.record_event(&EventRecord::new(tick, t, kind, text));
-    }
-}
-
-/// A short text on the stack for the rare events' texts (no heap allocation); the tick and its
-/// drivers (real-time loop, EGM) write them.
-pub(crate) struct StackText {
-    buf: [u8; 192],
-    len: usize,
-}
-
-impl StackText {
-    pub(crate) fn new() -> Self {
-        StackText { buf: [0; 192], len: 0 }
-    }
-    pub(crate) fn as_str(&self) -> &str {
-        std::str::from_utf8(&self.buf[..self.len]).unwrap_or("")
-    }
-}
-
-impl std::fmt::Write for StackText {
-    fn write_str(&mut self, s: &str) -> std::fmt::Result {
-        let n = s.len().min(self.buf.len() - self.len);
-        // Cut on a char boundary.
-        let n = (0..=n).rev().find(|&i| s.is_char_boundary(i)).unwrap_or(0);
-        self.buf[self.len..self.len + n].copy_from_slice(&s.as_bytes()[..n]);
-        self.len += n;
-        Ok(())
     }
 }

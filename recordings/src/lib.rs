@@ -72,9 +72,11 @@ pub struct TickRecord {
 pub struct StripRecord {
     /// Wheel position along the strip (task z), m. This is z_a of the force map (5.33).
     pub wheel_z_m: f64,
-    /// Contact force of the wheel on the strip, N.
+    /// Force of the wheel on the strip along task y, N: F_e's task-y component, negative when
+    /// pressing (messages/README.md, "Frames and signs").
     pub contact_force_n: f64,
-    /// Total bottom reaction force, N.
+    /// Force of the strip on the substrate along task y (the bottom reactions summed, their
+    /// opposite), N: negative when pressing, as `contact_force_n`.
     pub bottom_force_n: f64,
     /// Largest bottom pressure on the centre line x = 0, Pa.
     pub max_bottom_pressure_pa: f64,

@@ -78,16 +78,6 @@ pub struct StripGeometry {
 }
 
 impl SceneConfig {
-    /// The task frame of a scenario's placement: origin (strip_start_x, strip_y, table_z) in the
-    /// base; task x = base y, task y = base z, task z = base x.
-    pub fn task_frame(strip_start_x_m: f64, strip_y_m: f64, table_z_m: f64) -> Isometry3<f64> {
-        let rot = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0));
-        Isometry3::from_parts(
-            nalgebra::Translation3::new(strip_start_x_m, strip_y_m, table_z_m),
-            UnitQuaternion::from_rotation_matrix(&rot),
-        )
-    }
-
     /// Ticks between two scene samples at control period `period_s` (at least 1).
     pub fn every_ticks(&self, period_s: f64) -> u64 {
         let positive = |x: f64| x.is_finite() && x > 0.0;
@@ -322,7 +312,7 @@ pub fn scene_update(
         let mut arrow = entity("contact_force", "task");
         if f < 0.0 {
             let len = -f * ARROW_M_PER_N;
-            let top = crate::scene::STRIP_TOP_M + s.top_displacement_m;
+            let top = scenario::geometry::STRIP_TOP_HEIGHT_M + s.top_displacement_m;
             // The arrow points along its pose's +x: turned to -y (pressing).
             let rot = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), -std::f64::consts::FRAC_PI_2);
             let iso = Isometry3::from_parts(nalgebra::Translation3::new(0.0, top + len, s.wheel_z_m), rot);
@@ -339,9 +329,6 @@ pub fn scene_update(
     }
     SceneUpdate { deletions: Vec::new(), entities }
 }
-
-/// Height of the strip's top at its centre line, m (the plant's contact surface at rest).
-pub const STRIP_TOP_M: f64 = scenario::STRIP_TOP_HEIGHT_M;
 
 /// The Log level of an event kind: faults and refusals are errors, safe stops, reflexes and
 /// misses warnings, the rest information.

@@ -129,7 +129,7 @@ pub fn evaluate(robot: &Robot, s: &StateIn) -> Vec<(&'static str, Value)> {
         ("jacobian", rows(&robot.jacobian_flange(&s.q))),
         ("mass_matrix", rows(&robot.mass_matrix(&s.q))),
         ("gravity", list(&robot.gravity_torque(&s.q))),
-        ("coriolis", list(&robot.coriolis(&s.q, &s.qd))),
+        ("coriolis", list(&robot.coriolis_times_qd(&s.q, &s.qd))),
         ("tau", list(&robot.rnea(&s.q, &s.qd, &s.qdd))),
         ("qdd_fd", list(&robot.forward_dynamics(&s.q, &s.qd, &s.tau_fd))),
     ]

@@ -18,8 +18,9 @@ impl Robot {
         self.rnea_local(&sin_cos(q), &Vec6::zeros(), &Vec6::zeros(), Self::GRAVITY_MPS2)
     }
 
-    /// Coriolis and centrifugal torque `C(q, qd) qd` of (7.1) (no friction).
-    pub fn coriolis(&self, q: &Vec6, qd: &Vec6) -> Vec6 {
+    /// The Coriolis and centrifugal torque vector `C(q, q̇) q̇` of (7.1), not the matrix C: RNEA
+    /// with zero acceleration and no gravity (no friction; Pinocchio's `nonLinearEffects` minus g).
+    pub fn coriolis_times_qd(&self, q: &Vec6, qd: &Vec6) -> Vec6 {
         self.rnea_local(&sin_cos(q), qd, &Vec6::zeros(), 0.0)
     }
 

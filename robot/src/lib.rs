@@ -10,7 +10,7 @@ pub mod kinematics;
 pub mod model;
 mod newton_euler;
 pub mod params;
-pub mod scenario;
+pub mod pose;
 mod spatial;
 pub mod tool;
 pub mod urdf;
@@ -19,7 +19,7 @@ pub use ik::IkError;
 pub use kinematics::Frames;
 pub use model::{LinkInertia, Robot};
 pub use newton_euler::{sin_cos, SinCos};
-pub use scenario::{scenario_ik_seed, scenario_tcp_pose};
+pub use pose::{ik_seed_tool_down, tool_down_pose};
 pub use tool::Tool;
 
 /// Joint-space vector (rad, rad/s, rad/s^2 or N m).

@@ -101,7 +101,10 @@ fn rnea_equals_mass_matrix_coriolis_gravity() {
         for _ in 0..50 {
             let (q, qd, qdd) = (rng.vec6(3.0), rng.vec6(2.0), rng.vec6(5.0));
             let tau = robot.rnea(&q, &qd, &qdd);
-            let sum = robot.mass_matrix(&q) * qdd + robot.coriolis(&q, &qd) + robot.gravity_torque(&q) + robot.viscous.component_mul(&qd);
+            let sum = robot.mass_matrix(&q) * qdd
+                + robot.coriolis_times_qd(&q, &qd)
+                + robot.gravity_torque(&q)
+                + robot.viscous.component_mul(&qd);
             assert!(rel_err(&tau, &sum, 1e-9) < 1e-13, "{name}: {tau:?} vs {sum:?}");
         }
     }
@@ -112,8 +115,8 @@ fn coriolis_is_quadratic_in_velocity() {
     let robot = Robot::irb2400_with_tool(Tool::default());
     let mut rng = Rng::new(14);
     let (q, qd) = (rng.vec6(3.0), rng.vec6(2.0));
-    let c1 = robot.coriolis(&q, &qd);
-    let c3 = robot.coriolis(&q, &(qd * 3.0));
+    let c1 = robot.coriolis_times_qd(&q, &qd);
+    let c3 = robot.coriolis_times_qd(&q, &(qd * 3.0));
     assert!(rel_err(&(c1 * 9.0), &c3, 1e-9) < 1e-13);
 }
 
@@ -140,7 +143,7 @@ fn mdot_minus_2c_is_skew_along_qd() {
             let h = 1e-6;
             let mdot: Mat6 = (robot.mass_matrix(&(q + qd * h)) - robot.mass_matrix(&(q - qd * h))) / (2.0 * h);
             let lhs = qd.dot(&(mdot * qd));
-            let rhs = 2.0 * qd.dot(&robot.coriolis(&q, &qd));
+            let rhs = 2.0 * qd.dot(&robot.coriolis_times_qd(&q, &qd));
             assert!((lhs - rhs).abs() < 1e-7 * lhs.abs().max(1.0), "{name}: qd'Mdot qd = {lhs}, 2 qd'C qd = {rhs}");
         }
     }

@@ -3,7 +3,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
-use robot::{scenario_ik_seed, scenario_tcp_pose, Robot, Tool, Vec6};
+use robot::{ik_seed_tool_down, tool_down_pose, Robot, Tool, Vec6};
 
 struct Counting;
 
@@ -34,8 +34,8 @@ fn hot_paths_do_not_allocate() {
     let robot = Robot::irb2400_with_tool(Tool::default()).with_armature(Vec6::from_element(0.01)).with_viscous(Vec6::from_element(1.0));
     let q = Vec6::new(0.1, -1.2, 0.4, 0.2, 0.9, -0.3);
     let qd = Vec6::new(0.5, -0.3, 0.4, 1.0, -1.5, 2.0);
-    let target = scenario_tcp_pose(0.9, 0.0, 0.718);
-    let seed = scenario_ik_seed();
+    let target = tool_down_pose(0.9, 0.0, 0.718);
+    let seed = ik_seed_tool_down();
     let before = allocations();
     let mut sink = 0.0;
     for _ in 0..10 {
@@ -43,7 +43,7 @@ fn hot_paths_do_not_allocate() {
         sink += tau[0];
         sink += robot.mass_matrix(&q)[(1, 1)];
         sink += robot.forward_dynamics(&q, &qd, &tau)[2];
-        sink += robot.gravity_torque(&q)[1] + robot.coriolis(&q, &qd)[1];
+        sink += robot.gravity_torque(&q)[1] + robot.coriolis_times_qd(&q, &qd)[1];
         sink += robot.mass_matrix_and_bias(&q, &qd).1[0];
         sink += robot.jacobian_tcp(&q)[(0, 0)] + robot.jacobian_flange(&q)[(0, 0)];
         sink += robot.jdot_qdot_tcp(&q, &qd)[0];

@@ -1,7 +1,7 @@
 //! Inverse kinematics and conditioning at the default scenario's task pose (DESIGN section 3).
 
 use nalgebra::Vector3;
-use robot::{scenario_ik_seed, scenario_tcp_pose, IkError, Robot, Tool, Vec6};
+use robot::{ik_seed_tool_down, tool_down_pose, IkError, Robot, Tool, Vec6};
 
 /// Wheel centre (the TCP) one wheel radius above the strip top (table at 0.70 m plus the 8 mm
 /// strip), along base x from 0.88 m as the wheel rolls over task z = 2 .. 38 mm.
@@ -15,7 +15,7 @@ fn contact_point_touches_the_strip_when_tcp_is_one_radius_above() {
     let tool = Tool::default();
     let robot = Robot::irb2400_with_tool(tool);
     let (x, y, z) = scenario_targets().next().unwrap();
-    let q = robot.ik_tcp(&scenario_tcp_pose(x, y, z), &scenario_ik_seed()).unwrap();
+    let q = robot.ik_tcp(&tool_down_pose(x, y, z), &ik_seed_tool_down()).unwrap();
     let flange = robot.flange_pose(&q);
     let contact = flange * nalgebra::Point3::from(tool.contact_point_flange_m());
     assert!((contact.coords - Vector3::new(x, y, 0.708)).norm() < 1e-9, "{contact}");
@@ -25,8 +25,8 @@ fn contact_point_touches_the_strip_when_tcp_is_one_radius_above() {
 fn ik_round_trips_fk_along_the_strip() {
     let robot = Robot::irb2400_with_tool(Tool::default());
     for (x, y, z) in scenario_targets() {
-        let target = scenario_tcp_pose(x, y, z);
-        let q = robot.ik_tcp(&target, &scenario_ik_seed()).expect("scenario pose reachable");
+        let target = tool_down_pose(x, y, z);
+        let q = robot.ik_tcp(&target, &ik_seed_tool_down()).expect("scenario pose reachable");
         let reached = robot.tcp_pose(&q);
         assert!((reached.translation.vector - target.translation.vector).norm() < 1e-9);
         assert!(reached.rotation.angle_to(&target.rotation) < 1e-9);
@@ -58,13 +58,13 @@ fn ik_round_trips_fk_from_perturbed_seeds() {
 #[test]
 fn ik_reports_unreachable_targets() {
     let robot = Robot::irb2400_with_tool(Tool::default());
-    let far = scenario_tcp_pose(3.0, 0.0, 0.7);
-    match robot.ik_tcp(&far, &scenario_ik_seed()) {
+    let far = tool_down_pose(3.0, 0.0, 0.7);
+    match robot.ik_tcp(&far, &ik_seed_tool_down()) {
         Err(IkError::NotConverged { position_error_m, .. }) => assert!(position_error_m > 0.5),
         other => panic!("expected NotConverged, got {other:?}"),
     }
-    let nan = scenario_tcp_pose(f64::NAN, 0.0, 0.7);
-    assert_eq!(robot.ik_tcp(&nan, &scenario_ik_seed()), Err(IkError::NotFinite));
+    let nan = tool_down_pose(f64::NAN, 0.0, 0.7);
+    assert_eq!(robot.ik_tcp(&nan, &ik_seed_tool_down()), Err(IkError::NotFinite));
 }
 
 #[test]
@@ -72,7 +72,7 @@ fn jacobian_is_well_conditioned_at_the_scenario_pose() {
     // DESIGN section 3: condition number about 4.4 there.
     let robot = Robot::irb2400_with_tool(Tool::default());
     for (x, y, z) in scenario_targets() {
-        let q = robot.ik_tcp(&scenario_tcp_pose(x, y, z), &scenario_ik_seed()).unwrap();
+        let q = robot.ik_tcp(&tool_down_pose(x, y, z), &ik_seed_tool_down()).unwrap();
         let sv = robot.jacobian_tcp(&q).singular_values();
         let cond = sv.max() / sv.min();
         assert!((cond - 4.4).abs() < 0.2, "cond(J_tcp) = {cond} at x = {x}");

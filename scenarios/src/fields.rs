@@ -5,7 +5,8 @@
 //!
 //! Values are in the units the file uses (mm where the name says `_mm`, µs for `_us`).
 
-use crate::{Scenario, MAX_FORCE_POINTS, STRIP_TOP_HEIGHT_M};
+use crate::geometry::STRIP_TOP_HEIGHT_M;
+use crate::{Scenario, MAX_FORCE_POINTS};
 
 /// What a field holds in the file.
 #[derive(Debug, Clone, Copy)]

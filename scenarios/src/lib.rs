@@ -11,12 +11,9 @@
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// Height of the undeformed strip's top above its bottom, m: the cross-section of DESIGN section 4
-/// (a 4 mm rectangle plus a half-disc of radius 4 mm on top). Plant and controller share it.
-pub const STRIP_TOP_HEIGHT_M: f64 = 0.008;
-
 mod check;
 pub mod fields;
+pub mod geometry;
 
 /// Where a value of a scenario comes from, for messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -40,7 +40,7 @@ fn foxglove_libraries_read_the_robot_the_strip_and_the_timeline_of_a_real_run() 
     assert_eq!(rec.joint_state.len(), 3600);
 
     // The robot crate's FK of the recorded q at every scene tick (every 10th at 100 Hz).
-    let tool = plant_sim::physics::tool_from_scenario(&scenario);
+    let tool = scenario::geometry::tool(&scenario);
     let robot = robot::Robot::irb2400_with_tool(tool);
     let every = (1.0 / (scenario.recording.scene_rate_hz * scenario.loop_.period_s)).round() as u64;
     let mut tcp = serde_json::Map::new();

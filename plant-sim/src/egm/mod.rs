@@ -41,11 +41,11 @@ use robot::{Robot, Vec6};
 use scenario::{Mode, Scenario};
 
 use crate::limits::ReflexLimits;
-use crate::loop_rt::LoopStats;
 use crate::physics::Physics;
 use crate::recording::{EgmRecord, EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
 use crate::rt;
-use crate::tick::StackText;
+use crate::stack_text::StackText;
+use crate::stats::LoopStats;
 use servo::{Servo, ServoParams};
 use session::{Refusal, Rules, SensorBuffer};
 
@@ -90,7 +90,7 @@ impl EgmParams {
 /// The servo's model: the scenario's arm and tool, armature and friction, without the plant's
 /// inertia mismatch (`robot.plant_inertia_scale`).
 pub fn servo_model(s: &Scenario) -> Robot {
-    Robot::irb2400_with_tool(crate::physics::tool_from_scenario(s))
+    Robot::irb2400_with_tool(scenario::geometry::tool(s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms))
 }
@@ -208,7 +208,7 @@ impl<'a> EgmLoop<'a> {
         let wall_ns = self.start_wall_ns + sim_ns;
         let fb_pose = robot.tcp_pose(&q);
         let planned_pose = robot.tcp_pose(&q_r);
-        let (force, torque) = self.physics.wrench();
+        let (force, torque) = self.physics.wrench_on_tool();
         let q_deg = egm::axes::abb_deg_from_dh(&q.into());
         let r_deg = egm::axes::abb_deg_from_dh(&q_r.into());
         let m = &mut self.robot_msg;
@@ -441,7 +441,7 @@ impl EgmLoop<'_> {
                 consecutive_misses: 0,
                 total_misses: 0,
             };
-            let (force, torque) = self.physics.wrench();
+            let (force, torque) = self.physics.wrench_on_tool();
             let wrench = Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick, force, torque };
             let pre_ns = rt::now_mono_ns() - wake_ns;
             let t0 = rt::now_mono_ns();
