@@ -255,11 +255,19 @@ impl ControlLaw {
     }
 }
 
+/// The controller's robot model: the scenario's arm and tool ([`scenario::geometry::tool`]) with armature
+/// and viscous friction, deliberately WITHOUT `robot.plant_inertia_scale` (that is the plant's
+/// mismatch).
+pub fn controller_robot(s: &scenario::Scenario) -> Robot {
+    Robot::irb2400_with_tool(scenario::geometry::tool(s))
+        .with_armature(Vec6::from(s.robot.armature_kgm2))
+        .with_viscous(Vec6::from(s.robot.viscous_nms))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::reference::{Phase, ReferenceGenerator, ReferenceParams};
-    use crate::step::controller_robot;
     use nalgebra::{Rotation3, Unit};
     use scenario::geometry::{self, tool_down_rotation};
     use scenario::Scenario;

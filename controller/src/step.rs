@@ -7,8 +7,8 @@
 
 use messages::{state_flags, ControllerDiagnostics, ControllerStatus, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame};
 use nalgebra::{Matrix3, Vector3};
-use robot::{Robot, Vec6};
-use scenario::geometry::{self, tool_down_rotation, TaskFrame};
+use robot::Vec6;
+use scenario::geometry::{tool_down_rotation, TaskFrame};
 use scenario::Scenario;
 
 use crate::gains::Gains;
@@ -24,14 +24,8 @@ pub fn wrench_on_tool_base(w: &Wrench, rot_base_tool: &Matrix3<f64>) -> Vec6 {
     Vec6::new(f.x, f.y, f.z, m.x, m.y, m.z)
 }
 
-/// The controller's robot model: the scenario's arm and tool ([`geometry::tool`]) with armature
-/// and viscous friction, deliberately WITHOUT `robot.plant_inertia_scale` (that is the plant's
-/// mismatch).
-pub fn controller_robot(s: &Scenario) -> Robot {
-    Robot::irb2400_with_tool(geometry::tool(s))
-        .with_armature(Vec6::from(s.robot.armature_kgm2))
-        .with_viscous(Vec6::from(s.robot.viscous_nms))
-}
+/// The controller's robot model (defined with the law it serves).
+pub use crate::law::controller_robot;
 
 /// The force controller of a scenario, between ticks.
 pub struct Controller {
