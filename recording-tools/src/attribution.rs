@@ -243,14 +243,17 @@ pub fn attribute(rows: &[TimingRow]) -> Attribution {
     // Every wake-up the probe reported, on the run's time line (ns since its start), by start: a
     // stall is reported at the plant's first tick after the probe woke, so one that held a CPU
     // for 7 ms is reported 7 ticks after the first tick it cost; it is found by time, not by row.
-    // The probe's deadline before the one it was late for was met, so the stall began at most a
-    // probe period before that deadline.
+    // A stall counts from the deadline the probe was late for to its wake-up: the CPU was surely
+    // not the probe's (FIFO 90, the highest there) for that long. It may have begun up to a probe
+    // period earlier, but nothing shows it did; counting that period too handed the host a
+    // controller's 720 µs overrun for a 142 µs late probe (a stall of two CPUs' merged report
+    // need not even be the controller's CPU).
     let mut seen: Vec<Stall> = rows
         .iter()
         .filter_map(|r| r.timing.stages.filter(|o| o.probe && o.probe_late_ns > 0))
         .map(|o| {
             let at = o.deadline_since_start_ns as i64 + o.probe_stall_from_ns;
-            Stall { from_ns: at - o.probe_period_ns as i64, to_ns: at + o.probe_late_ns as i64 }
+            Stall { from_ns: at, to_ns: at + o.probe_late_ns as i64 }
         })
         .collect();
     seen.sort_by_key(|s| s.from_ns);
@@ -612,15 +615,19 @@ mod tests {
         assert_eq!(attribute(&rows(0)).cause_of_tick(5), Some(Cause::PlantLate));
     }
 
+    /// A stall counts from the deadline the probe was late for, not from its previous one: the
+    /// probe shows the CPU was not its own from then until it woke, and nothing earlier. Tick 5's
+    /// budget runs from its publish at +10 µs to +510 µs; the controller's share is 350 µs.
     #[test]
-    fn a_stall_began_at_most_one_probe_period_before_the_deadline_it_was_seen_at() {
-        // A 1 ms probe first late at +500 µs (546 µs): the stall may have begun just after its
-        // previous deadline, 500 µs before tick 5's, and so may have taken the whole budget.
-        assert_eq!(stall_after_no_answer(1000, 500, 546), Cause::Host);
-        // A 250 µs probe late at +625 µs, on time at +375: the host took at most the 135 µs from
-        // 375 to 510 µs of the budget, under the compute share (350 µs): the controller's.
+    fn a_stall_counts_from_the_deadline_the_probe_was_late_for() {
+        // A 1 ms probe late at +500 µs (by 546 µs): 10 µs of the budget, the controller's miss.
+        assert_eq!(stall_after_no_answer(1000, 500, 546), Cause::NoAnswer);
+        // Late at +100 µs instead: the host took 410 µs of the budget.
+        assert_eq!(stall_after_no_answer(1000, 100, 546), Cause::Host);
+        // A 250 µs probe late at +625 or +375 µs: 0 and 135 µs of the budget, under the share.
         assert_eq!(stall_after_no_answer(250, 625, 700), Cause::NoAnswer);
-        // Late at +375 µs, on time at +125: it may have taken the 385 µs from 125 to 510 µs.
-        assert_eq!(stall_after_no_answer(250, 375, 700), Cause::Host);
+        assert_eq!(stall_after_no_answer(250, 375, 700), Cause::NoAnswer);
+        // Late at +125 µs: 385 µs of it.
+        assert_eq!(stall_after_no_answer(250, 125, 700), Cause::Host);
     }
 }
