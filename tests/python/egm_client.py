@@ -12,6 +12,8 @@ MODE:
   silent      hold for 50 cycles, then stop answering (the robot's comm_timeout ends the session)
   repeat_seq  hold for 50 cycles, then send one message with the previous sequence number again
   out_of_limit  hold for 50 cycles, then command axis 3 to 70 degrees (its range ends at 65)
+  too_fast    hold for 50 cycles, then command axis 6 3 degrees on within one cycle (750 deg/s at
+              the 4 ms cycle; the axis makes 450 deg/s), then hold again
 """
 import json
 import sys
@@ -61,6 +63,8 @@ while n < max_cycles:
         elif mode == "out_of_limit" and n == 50:
             cmd = hold.copy()
             cmd[2] = 70.0
+        elif mode == "too_fast" and n == 50:
+            cmd = hold + np.array([0, 0, 0, 0, 0, 3.0])
         elif mode == "repeat_seq" and n == 50:
             # abb-robot-client steps its sequence number by 2 per message; go back one message
             egm.send_sequence_number -= 2

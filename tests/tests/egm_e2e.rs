@@ -213,6 +213,28 @@ fn an_out_of_range_reference_is_refused_with_an_event_and_the_arm_stays() {
     assert!(drift < 1e-6, "the refused reference moved the arm by {drift} rad");
 }
 
+#[test]
+fn a_reference_faster_than_the_axis_is_refused_with_an_event_and_the_arm_stays() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(run) = egm_run("egm_too_fast", "egm-fast", "too_fast", 0.3, "") else { return };
+    let (_rig, summary, rec, log) = run.finish();
+    assert_eq!(summary["refusals"], 1, "{summary}");
+    let texts = events_text(&rec, EventKind::EgmRefused);
+    assert_eq!(texts.len(), 1, "{:?}", rec.events);
+    // 3 degrees in one 4 ms cycle is 750 deg/s; IRB 2400's axis 6 makes 450 deg/s.
+    assert!(
+        texts[0].starts_with(
+            "tick 200: EGM sensor message refused: axis 6 reference needs 750.0 deg/s within one cycle, the axis speed is 450 deg/s"
+        ),
+        "{texts:?}"
+    );
+    // The client went back to holding after the refused step, and those messages were taken.
+    assert!(log.len() > 60, "{} cycles", log.len());
+    let q0 = rec.joint_state[0].q;
+    let drift = rec.joint_state.iter().map(|s| (Vec6::from(s.q) - Vec6::from(q0)).amax()).fold(0.0, f64::max);
+    assert!(drift < 1e-6, "the refused reference moved the arm by {drift} rad");
+}
+
 /// `scenarios/egm.toml` with the sensor on `port`, written into `dir`.
 fn egm_scenario_on(dir: &Path, port: u16) -> PathBuf {
     let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/egm.toml")).unwrap();
