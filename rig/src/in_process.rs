@@ -2,7 +2,7 @@
 //! ([`plant_sim::PlantTick`]) and the controller's step ([`controller::Controller`]) in one
 //! thread, no daemons, no iceoryx2, recorded through the same writer as the plant's. Transport is
 //! transparent: every state, wrench and torque is bit-identical to the daemons' lockstep run of
-//! the same scenario (tests/tests/tick_identity.rs, sweep.rs).
+//! the same scenario (rig-tests/tests/tick_identity.rs, sweep.rs).
 
 use std::path::Path;
 use std::time::Instant;

@@ -1,6 +1,6 @@
 //! End-to-end over EGM: the real `plant-sim` as an ABB robot controller (`[egm] enabled`) and a
 //! real third-party EGM client, `abb-robot-client`'s `abb_robot_client.egm.EGM` (Python, unchanged;
-//! `tests/python/egm_client.py` drives it), over UDP on a port of each test's own. Build first:
+//! `rig-tests/python/egm_client.py` drives it), over UDP on a port of each test's own. Build first:
 //! `cargo build --release --workspace --bins`; needs `pip install abb-robot-client` (the tests
 //! fail without it; `.ci/deps` installs it).
 

@@ -3,7 +3,7 @@
 //! exit status and a dead controller under `rig run`. Build first:
 //! `cargo build --release --workspace --bins`.
 //!
-//! The misbehaving controller is `fault-controller` (tests/src/bin/fault_controller.rs). `rig run
+//! The misbehaving controller is `fault-controller` (rig-tests/src/bin/fault_controller.rs). `rig run
 //! --controller` takes a path without arguments, so its faults are given through a wrapper script
 //! (`exec fault-controller FAULTS "$@"`).
 //!
