@@ -8,8 +8,8 @@
 use messages::{state_flags, ControllerDiagnostics, ControllerStatus, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame};
 use nalgebra::{Matrix3, Vector3};
 use robot::Vec6;
-use scenario::geometry::{tool_down_rotation, TaskFrame};
-use scenario::Scenario;
+use scenarios::geometry::{tool_down_rotation, TaskFrame};
+use scenarios::Scenario;
 
 use crate::gains::Gains;
 use crate::law::ControlLaw;

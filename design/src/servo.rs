@@ -12,7 +12,7 @@ use controller::Controller;
 use plant_sim::tick::FirstTicks;
 use plant_sim::PlantTick;
 use recording_tools::tracking::{rolling_force_tracking, ForceTracking, TrackingTick};
-use scenario::{Mode, Scenario};
+use scenarios::{Mode, Scenario};
 
 /// One sample of the servo run per tick, as a lockstep recording has it: the state's time, the
 /// controller's phase and force reference after answering it, and the strip after the tick was

@@ -12,7 +12,7 @@
 use std::fmt::Write as _;
 
 use messages::{state_flags, ControllerDiagnostics, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
-use scenario::{Mode, Scenario};
+use scenarios::{Mode, Scenario};
 
 use crate::gate::{Decision, Gate, GateConfig};
 use crate::limits::ReflexLimits;

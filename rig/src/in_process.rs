@@ -14,7 +14,7 @@ use plant_sim::run::{nominal_duration_s, open_recorder_with, RecordingAbout, Run
 use plant_sim::stats::LoopStats;
 use plant_sim::PlantTick;
 use recordings::TimingRecord;
-use scenario::{Mode, Scenario};
+use scenarios::{Mode, Scenario};
 
 /// `controller_id` of the in-process controller (no process to name it after).
 const IN_PROCESS_CONTROLLER_ID: u64 = 1;
