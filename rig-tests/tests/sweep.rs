@@ -58,6 +58,48 @@ fn a_sweep_over_bump_heights_is_the_runs_it_stands_for_and_the_bump_superposes()
         assert_eq!(daemons.rig_metadata("transport"), None, "case {n}: the daemons' run");
         assert_eq!(physics_digest(&swept), physics_digest(&daemons), "case {n}: in-process sweep case != daemons' lockstep run");
     }
+
+    // A case records every tick, and the Foxglove scene at the sweep's 10 Hz (its scenario says
+    // so): 3.6 s of the default scenario are 3600 joint states and 36 scenes.
+    let case = out.join("case-00");
+    let text = std::fs::read_to_string(case.join("scenario.toml")).unwrap();
+    let s: toml::Table = text.parse().unwrap();
+    assert_eq!(s["recording"]["scene_rate_hz"].as_float(), Some(10.0), "{text}");
+    let counts = topic_counts(&case.join("run.mcap"));
+    assert_eq!((counts["/joint_state"], counts["/strip"], counts["/strip_scene"], counts["/tf"]), (3600, 3600, 36, 36), "{counts:?}");
+}
+
+/// Messages per topic, read with the mcap crate (not the rig's reader).
+fn topic_counts(path: &Path) -> std::collections::BTreeMap<String, usize> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut counts = std::collections::BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        *counts.entry(m.unwrap().channel.topic.clone()).or_insert(0) += 1;
+    }
+    counts
+}
+
+#[test]
+fn scene_rate_flag_and_a_base_scenarios_own_rate_are_kept() {
+    let rig = unique_rig("sweep-scene");
+    let dir = temp_dir(&rig);
+    let base = dir.join("base.toml");
+    let default = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/default.toml");
+    std::fs::write(&base, std::fs::read_to_string(default).unwrap() + "\n[recording]\nscene_rate_hz = 50.0\n").unwrap();
+    for (flag, want) in [(None, 50.0), (Some("4"), 4.0)] {
+        let out = dir.join(format!("out-{want}"));
+        let mut args =
+            vec!["sweep", base.to_str().unwrap(), "--set", "trajectory.roll_s=1", "--duration", "0.5", "--out", out.to_str().unwrap()];
+        if let Some(f) = flag {
+            args.extend(["--scene-rate", f]);
+        }
+        let mut sweep = Daemon::start("rig sweep", &bin("rig"), &args, &dir);
+        assert!(sweep.expect_exit(LONG).success(), "{}", sweep.stderr());
+        let s: toml::Table = std::fs::read_to_string(out.join("case-00/scenario.toml")).unwrap().parse().unwrap();
+        assert_eq!(s["recording"]["scene_rate_hz"].as_float(), Some(want), "--scene-rate {flag:?}");
+        let counts = topic_counts(&out.join("case-00/run.mcap"));
+        assert_eq!((counts["/joint_state"], counts["/strip_scene"]), (500, (0.5 * want) as usize), "--scene-rate {flag:?}: {counts:?}");
+    }
 }
 
 #[test]

@@ -160,6 +160,10 @@ struct SweepArgs {
     /// Every combination of the axes' values (default: each axis varied alone around the base).
     #[arg(long)]
     grid: bool,
+    /// Each case's rate of the Foxglove scene and transforms (`recording.scene_rate_hz`), Hz
+    /// (default: 10, or the base scenario's own). Every per-tick channel is recorded whatever it is.
+    #[arg(long, allow_hyphen_values = true, value_parser = positive_hertz)]
+    scene_rate: Option<f64>,
     #[command(flatten)]
     launch: LaunchArgs,
 }
@@ -172,6 +176,11 @@ fn flag_number(s: &str, zero_ok: bool, unit: &str) -> Result<f64, String> {
         Ok(_) => Err(format!("must be a finite number of {unit} {}", if zero_ok { ">= 0" } else { "> 0" })),
         Err(_) => Err(format!("must be a number of {unit}")),
     }
+}
+
+/// A flag's rate, Hz, > 0 (`--scene-rate`).
+fn positive_hertz(s: &str) -> Result<f64, String> {
+    flag_number(s, false, "Hz")
 }
 
 /// A flag's length of time, s (`--duration`, `--seconds`).
@@ -437,8 +446,10 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
         let label = sweep::label(&a.axes, case);
         let mut doc = sweep::case_scenario(&base, &a.axes, case);
         doc.insert("description".into(), format!("rig sweep case {n}: {} with {label}", base_path.display()).into());
+        let mut flags = sweep::set_flags(&a.axes, case);
+        flags.extend(sweep::set_scene_rate(&mut doc, &a.axes, a.scene_rate));
         std::fs::write(&path, toml::to_string(&doc)?).with_context(|| format!("writing {}", path.display()))?;
-        let s = scenarios::Scenario::load(&path).map_err(|e| sweep::blame_flags(e, &sweep::set_flags(&a.axes, case)))?;
+        let s = scenarios::Scenario::load(&path).map_err(|e| sweep::blame_flags(e, &flags))?;
         check_duration("--duration", a.launch.duration, &s, &path)?;
         planned.push((case_dir, path, label));
     }

@@ -109,6 +109,34 @@ pub fn case_scenario(base: &toml::Table, axes: &[Axis], case: &[(usize, usize)])
     doc
 }
 
+/// A case's Foxglove scene and transforms rate, Hz, unless `--scene-rate` or the base scenario
+/// says otherwise. A sweep is read as numbers (the table, `rig compare`); at the scenario default
+/// of 100 Hz the scene is about 80 % of a recording's bytes before compression and a third of the
+/// sweep's CPU goes to the writers. Every per-tick channel is recorded whatever the rate.
+pub const SWEEP_SCENE_RATE_HZ: f64 = 10.0;
+
+/// Sets the case's `recording.scene_rate_hz`: to `flag` when given, else to
+/// [`SWEEP_SCENE_RATE_HZ`] unless the base scenario sets its own; never when an axis varies it.
+/// Returns the `blame_flags` entry when the flag set it.
+pub fn set_scene_rate(doc: &mut toml::Table, axes: &[Axis], flag: Option<f64>) -> Option<(String, String)> {
+    const KEY: (&str, &str) = ("recording", "scene_rate_hz");
+    if axes.iter().any(|a| (a.section.as_str(), a.field.as_str()) == KEY) {
+        return None;
+    }
+    let section = doc.entry(KEY.0).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    let toml::Value::Table(t) = section else { return None };
+    match flag {
+        Some(hz) => {
+            t.insert(KEY.1.into(), hz.into());
+            Some((format!("{}.{}", KEY.0, KEY.1), format!("--scene-rate {hz}")))
+        }
+        None => {
+            t.entry(KEY.1).or_insert(SWEEP_SCENE_RATE_HZ.into());
+            None
+        }
+    }
+}
+
 /// What one case measured (from its recording and the plant's summary).
 #[derive(Debug, Clone, Serialize)]
 pub struct CaseResult {
@@ -265,6 +293,29 @@ pub fn run_cases<C: Sync, R: Send>(cases: &[C], case: impl Fn(usize, &C) -> R + 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scene_rate_is_the_flags_else_the_bases_else_the_sweeps_and_never_an_axis() {
+        let rate = |doc: &toml::Table| doc.get("recording").and_then(|r| r.get("scene_rate_hz")).and_then(toml::Value::as_float);
+        let bare: toml::Table = "[bulge]\nheight_mm = 0.2\n".parse().unwrap();
+        let own: toml::Table = "[recording]\nscene_rate_hz = 50.0\n".parse().unwrap();
+        let height = [parse_axis("bulge.height_mm=0.1").unwrap()];
+        for (base, flag, want, blamed) in [
+            (&bare, None, SWEEP_SCENE_RATE_HZ, false),
+            (&own, None, 50.0, false),
+            (&bare, Some(4.0), 4.0, true),
+            (&own, Some(4.0), 4.0, true),
+        ] {
+            let mut doc = base.clone();
+            let blame = set_scene_rate(&mut doc, &height, flag);
+            assert_eq!((rate(&doc), blame.is_some()), (Some(want), blamed), "base {base:?}, flag {flag:?}");
+        }
+        // An axis over the rate decides it for each case.
+        let axis = [parse_axis("recording.scene_rate_hz=20").unwrap()];
+        let mut doc = bare.clone();
+        assert_eq!(set_scene_rate(&mut doc, &axis, Some(4.0)), None);
+        assert_eq!(rate(&doc), None);
+    }
 
     #[test]
     fn axes_parse_scalars_and_name_bad_input() {
