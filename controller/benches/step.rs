@@ -8,8 +8,8 @@ use controller::step::controller_robot;
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use messages::{JointState, Wrench, WrenchFrame, CONTRACT_VERSION};
 use robot::Vec6;
-use scenario::geometry::{self, tool_down_rotation, TaskFrame};
-use scenario::Scenario;
+use scenarios::geometry::{self, tool_down_rotation, TaskFrame};
+use scenarios::Scenario;
 
 fn bench(c: &mut Criterion) {
     let s = Scenario::default();

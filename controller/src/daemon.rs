@@ -16,7 +16,7 @@ use messages::ports::{ControllerPorts, Wake};
 use messages::{check_version, state_flags, JointState, PlantStatus, Wrench, WrenchFrame};
 use nalgebra::Vector3;
 use robot::Vec6;
-use scenario::Scenario;
+use scenarios::Scenario;
 
 use crate::law::ControlLaw;
 use crate::step::Controller;

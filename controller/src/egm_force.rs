@@ -23,8 +23,8 @@
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use robot::{Robot, Vec6};
-use scenario::geometry::{self, TaskFrame};
-use scenario::Scenario;
+use scenarios::geometry::{self, TaskFrame};
+use scenarios::Scenario;
 
 use crate::reference::{ReferenceGenerator, ReferenceParams, TaskReference};
 

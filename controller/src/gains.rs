@@ -22,7 +22,7 @@
 //!
 //! Motion directions (7.8): critically damped PD, k_p = ω_m², k_d = 2 ζ ω_m.
 
-use scenario::Scenario;
+use scenarios::Scenario;
 use std::f64::consts::TAU;
 
 /// b_d/m_d in units of the crossover frequency (see the module docs).

@@ -21,7 +21,7 @@ use robot::{Frames, Mat6, Robot, Vec6};
 
 use crate::gains::Gains;
 use crate::reference::TaskReference;
-use scenario::geometry::TaskFrame;
+use scenarios::geometry::TaskFrame;
 
 /// Logarithm map of SO(3): the rotation vector θ·a of `r` (|θ| ≤ π), robust near 0 and π.
 pub fn so3_log(r: &Matrix3<f64>) -> Vector3<f64> {
@@ -255,11 +255,11 @@ impl ControlLaw {
     }
 }
 
-/// The controller's robot model: the scenario's arm and tool ([`scenario::geometry::tool`]) with armature
+/// The controller's robot model: the scenario's arm and tool ([`scenarios::geometry::tool`]) with armature
 /// and viscous friction, deliberately WITHOUT `robot.plant_inertia_scale` (that is the plant's
 /// mismatch).
-pub fn controller_robot(s: &scenario::Scenario) -> Robot {
-    Robot::irb2400_with_tool(scenario::geometry::tool(s))
+pub fn controller_robot(s: &scenarios::Scenario) -> Robot {
+    Robot::irb2400_with_tool(scenarios::geometry::tool(s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms))
 }
@@ -269,8 +269,8 @@ mod tests {
     use super::*;
     use crate::reference::{Phase, ReferenceGenerator, ReferenceParams};
     use nalgebra::{Rotation3, Unit};
-    use scenario::geometry::{self, tool_down_rotation};
-    use scenario::Scenario;
+    use scenarios::geometry::{self, tool_down_rotation};
+    use scenarios::Scenario;
 
     fn setup() -> (Scenario, ControlLaw, Vec6) {
         let s = Scenario::default();

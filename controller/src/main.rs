@@ -45,7 +45,7 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> anyhow::Result<()> {
     messages::services::validate_rig_name(&args.rig).map_err(anyhow::Error::msg)?;
-    let scenario = scenario::Scenario::load(&args.scenario)?;
+    let scenario = scenarios::Scenario::load(&args.scenario)?;
     // Before any node: the rig's iceoryx2 configuration and room in /dev/shm.
     messages::host::prepare()?;
     let mut cfg = controller::daemon::DaemonConfig::new(&args.rig, scenario);

@@ -11,9 +11,9 @@
 //! continuous) so the PD feed-forward never sees steps.
 
 use nalgebra::Vector3;
-use scenario::{Scenario, MAX_FORCE_POINTS};
+use scenarios::{Scenario, MAX_FORCE_POINTS};
 
-use scenario::geometry::{self, STRIP_TOP_HEIGHT_M};
+use scenarios::geometry::{self, STRIP_TOP_HEIGHT_M};
 
 /// Phase of the run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

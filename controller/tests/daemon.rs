@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use controller::daemon::{run, DaemonConfig};
 use messages::ports::{PlantPorts, Wake};
 use messages::{JointState, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
-use scenario::Scenario;
+use scenarios::Scenario;
 
 fn unique_rig(tag: &str) -> String {
     let n = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos();
@@ -19,7 +19,7 @@ fn start_q() -> [f64; 6] {
     // IK of the scenario start pose with the controller's own model.
     let s = Scenario::default();
     let robot = controller::step::controller_robot(&s);
-    robot.ik_tcp(&scenario::geometry::start_tcp_pose(&s), &robot::ik_seed_tool_down()).unwrap().into()
+    robot.ik_tcp(&scenarios::geometry::start_tcp_pose(&s), &robot::ik_seed_tool_down()).unwrap().into()
 }
 
 fn state(tick: u64, status: PlantStatus, q: [f64; 6]) -> JointState {

@@ -2,7 +2,7 @@
 //! `robustness [CACHE_DIR]` prints max/RMS rolling-phase tracking for bulge heights 0.1/0.2/0.4 mm,
 //! roll times 1/2/4 s and plant inertia ±10 %, with and without integral action, plus the
 //! substep-halving check.
-use scenario::Scenario;
+use scenarios::Scenario;
 
 fn main() -> anyhow::Result<()> {
     let cache = std::env::args().nth(1).unwrap_or_else(|| "target/strip-cache".into());

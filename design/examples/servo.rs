@@ -1,7 +1,7 @@
 //! Debug: in-process servo run of a scenario; prints tracking numbers.
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let s = scenario::Scenario::load(std::path::Path::new(&args[1]))?;
+    let s = scenarios::Scenario::load(std::path::Path::new(&args[1]))?;
     let run = design::servo::run_servo_full(&s, std::path::Path::new("target/strip-cache"), 0.0)?;
     if let Some((z, p)) = run.weakest_bond(4e-3, 36e-3) {
         println!("weakest bond in [4, 36] mm: {:.1} kPa at z = {:.1} mm", p / 1e3, z * 1e3);

@@ -2,7 +2,7 @@
 fn main() -> anyhow::Result<()> {
     let a: Vec<String> = std::env::args().collect();
     let rec = recording_tools::read::Recording::open(&a[1])?;
-    let s = scenario::Scenario::load(std::path::Path::new(&a[2]))?;
+    let s = scenarios::Scenario::load(std::path::Path::new(&a[2]))?;
     let z: f64 = a.get(3).map_or(8.0, |x| x.parse().unwrap());
     let model = strip::StripModel::load_or_build_in(std::path::Path::new("target/strip-cache"), &plant_sim::contact::strip_params(&s))?;
     let c = design::stress::compare_at(&rec, &model, z * 1e-3)?;

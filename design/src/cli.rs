@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use controller::gains::Gains;
 use recording_tools::plots::{save_lines, LinePlot, Series};
-use scenario::geometry::{self, TaskFrame};
-use scenario::Scenario;
+use scenarios::geometry::{self, TaskFrame};
+use scenarios::Scenario;
 use strip::StripModel;
 
 use crate::freq::{log_grid, margins, unwrap_deg, Margins};

@@ -17,7 +17,7 @@
 
 use controller::egm_force::EgmForceDesign;
 use nalgebra::Complex;
-use scenario::Scenario;
+use scenarios::Scenario;
 use strip::StripModel;
 
 use crate::freq::{log_grid, margins, unwrap_deg, Margins};

@@ -11,7 +11,7 @@ use nalgebra::{Matrix3, Vector3};
 use plant_sim::contact::{ContactGeometry, StripContact};
 use recordings::StripRecord;
 use robot::Vec6;
-use scenario::Scenario;
+use scenarios::Scenario;
 use strip::StripModel;
 
 use crate::servo::ServoSample;
@@ -24,7 +24,7 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
     let h = period / n_sub as f64;
     let mut contact = StripContact::new(model, geo, h);
     let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
-    let rot: Matrix3<f64> = scenario::geometry::tool_down_rotation();
+    let rot: Matrix3<f64> = scenarios::geometry::tool_down_rotation();
     // Wheel centre (TCP) in the task frame: z along the strip, y up.
     let start = reference.params().start_task_m;
     let (mut y, mut vy, mut z) = (start.y, 0.0, start.z);

@@ -1,4 +1,4 @@
-//! Child processes of the rig's launchers, written once: `rig` (`launch`, through tokio), `rig
+//! Child processes of the rig's launchers, written once: `rig` (crate `rig`, through tokio), `rig
 //! replay` (`recording-tools`) and the end-to-end tests' harness (`rig-tests`) spawn, wait for,
 //! stop and describe their daemons with these.
 //!

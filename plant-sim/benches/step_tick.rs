@@ -7,7 +7,7 @@ use plant_sim::physics::Physics;
 use std::path::Path;
 
 fn step_tick(c: &mut Criterion) {
-    let mut s = scenario::Scenario::default();
+    let mut s = scenarios::Scenario::default();
     s.strip.enabled = false;
     let mut p = Physics::new(&s, Path::new("/nonexistent")).unwrap();
     c.bench_function("physics.step_tick (robot only, default substeps)", |b| {
@@ -17,7 +17,7 @@ fn step_tick(c: &mut Criterion) {
         })
     });
     let mut s_rk4 = s.clone();
-    s_rk4.loop_.integrator = scenario::Integrator::Rk4;
+    s_rk4.loop_.integrator = scenarios::Integrator::Rk4;
     let mut p_rk4 = Physics::new(&s_rk4, Path::new("/nonexistent")).unwrap();
     c.bench_function("physics.step_tick (robot only, default substeps, rk4)", |b| {
         b.iter(|| {
@@ -30,7 +30,7 @@ fn step_tick(c: &mut Criterion) {
     let tau = p.gravity_torque();
     c.bench_function("robot.forward_dynamics", |b| b.iter(|| robot.forward_dynamics(std::hint::black_box(&q), &qd, &tau)));
 
-    let s = scenario::Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/default.toml")).unwrap();
+    let s = scenarios::Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/default.toml")).unwrap();
     let mut p = Physics::new(&s, &strip::cache::cache_dir()).unwrap();
     c.bench_function("physics.step_tick (default scenario, with strip)", |b| {
         b.iter(|| {

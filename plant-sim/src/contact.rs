@@ -35,10 +35,10 @@ use std::sync::Arc;
 use nalgebra::{Matrix3, Vector3};
 use recordings::{StripRecord, MAX_CENTRELINE};
 use robot::Vec6;
-use scenario::Scenario;
+use scenarios::Scenario;
 use strip::{CbBoundary, StripModel, StripParams, Substrate};
 
-use scenario::geometry::{TaskFrame, STRIP_TOP_HEIGHT_M};
+use scenarios::geometry::{TaskFrame, STRIP_TOP_HEIGHT_M};
 
 /// z_a grid spacing of the wheel-direction table, m.
 pub const TABLE_STEP_M: f64 = 0.05e-3;
@@ -69,7 +69,7 @@ pub fn strip_params(s: &Scenario) -> StripParams {
 /// Where the strip lies and how the wheel touches it (SI, DESIGN section 3).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactGeometry {
-    /// The strip's task frame in the base (`scenario::geometry`).
+    /// The strip's task frame in the base (`scenarios::geometry`).
     pub task: TaskFrame,
     pub wheel_radius_m: f64,
     /// Penalty stiffness (N/m) and damping (N s/m).

@@ -153,7 +153,7 @@ pub struct ReflexLimits {
 }
 
 impl ReflexLimits {
-    pub fn from_scenario(s: &scenario::Scenario) -> ReflexLimits {
+    pub fn from_scenario(s: &scenarios::Scenario) -> ReflexLimits {
         ReflexLimits {
             joint_speed_radps: VELOCITY_LIMIT_RADPS,
             tcp_speed_mps: s.safety.max_tcp_speed_mps,

@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 use messages::liveness::PeerWatch;
 use messages::ports::{Answers, PlantPorts};
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench};
-use scenario::Mode;
+use scenarios::Mode;
 
 use crate::arbiter::{Arbiter, ArbiterEvents, TakeoverReason};
 use crate::recording::{ControllerStamps, EventKind, EventRecord, Recorder, StageStamps, TimingRecord};

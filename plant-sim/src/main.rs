@@ -9,7 +9,7 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use scenario::Mode;
+use scenarios::Mode;
 
 #[derive(Debug, Parser)]
 #[command(name = "plant-sim", about = "Plant daemon of the weatherstrip rig: robot (+ strip) simulation, the 1 kHz clock master")]

@@ -26,8 +26,8 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use robot::{Robot, Vec6};
-use scenario::geometry::{self, TaskFrame};
-use scenario::{Integrator, Scenario};
+use scenarios::geometry::{self, TaskFrame};
+use scenarios::{Integrator, Scenario};
 
 use crate::contact::StripTables;
 

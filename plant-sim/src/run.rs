@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use scenario::{Mode, Scenario};
+use scenarios::{Mode, Scenario};
 
 use crate::loop_rt::{LoopParams, PlantLoop};
 use crate::physics::Physics;
@@ -356,7 +356,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
 
 /// What the recording's Foxglove channels draw: the scenario's tool and placement, and the strip
 /// model's top surface (`recordings::scene`).
-fn scene_config(s: &scenario::Scenario, contact: Option<&crate::contact::StripContact>) -> recordings::scene::SceneConfig {
+fn scene_config(s: &scenarios::Scenario, contact: Option<&crate::contact::StripContact>) -> recordings::scene::SceneConfig {
     use recordings::scene::{SceneConfig, StripGeometry};
     let params = crate::contact::strip_params(s);
     let strip = contact.map(|c| {
@@ -377,8 +377,8 @@ fn scene_config(s: &scenario::Scenario, contact: Option<&crate::contact::StripCo
     });
     SceneConfig {
         rate_hz: s.recording.scene_rate_hz,
-        tool: scenario::geometry::tool(s),
-        task_in_base: scenario::geometry::TaskFrame::from_scenario(s).pose_in_base(),
+        tool: scenarios::geometry::tool(s),
+        task_in_base: scenarios::geometry::TaskFrame::from_scenario(s).pose_in_base(),
         strip,
     }
 }

@@ -1,4 +1,4 @@
-//! The `rig replay`, `rig report` and `rig compare` subcommands (the `rig` binary in `launch` wires
+//! The `rig replay`, `rig report` and `rig compare` subcommands (the `rig` binary of crate `rig` wires
 //! them) and the numbers `rig run` prints at its end. The arguments of `rig replay` live with the
 //! replay ([`ReplayArgs`]), the opening rule of every command with the reader ([`open_for`]).
 

@@ -209,7 +209,7 @@ fn scenario_file(rec: &Recording, given: Option<&Path>, tmp_dir: &Path) -> anyho
 }
 
 fn blend_ticks(scenario: &Path, period_s: f64) -> anyhow::Result<u32> {
-    let s = scenario::Scenario::load(scenario).with_context(|| format!("reading the scenario {}", scenario.display()))?;
+    let s = scenarios::Scenario::load(scenario).with_context(|| format!("reading the scenario {}", scenario.display()))?;
     let period = if period_s > 0.0 { period_s } else { s.loop_.period_s };
     Ok((s.loop_.takeover_blend_s / period).round() as u32)
 }
@@ -258,7 +258,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
     } else if let Some(s) = args.scenario.as_deref() {
         blend = blend_ticks(s, rec.period_s())?;
     } else if let Some(text) = rec.rig_metadata("scenario_toml") {
-        if let Ok(s) = scenario::Scenario::from_toml_str(text, Path::new("<recording>")) {
+        if let Ok(s) = scenarios::Scenario::from_toml_str(text, Path::new("<recording>")) {
             blend = (s.loop_.takeover_blend_s / rec.period_s().max(1e-9)).round() as u32;
         }
     }

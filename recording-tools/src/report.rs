@@ -233,7 +233,7 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
 
 /// The constant force set-point of an EGM run's scenario (`[egm] enabled`, no force table), N.
 fn egm_force_ref(rec: &Recording) -> Option<f64> {
-    let s: scenario::Scenario = toml::from_str(rec.rig_metadata("scenario_toml")?).ok()?;
+    let s: scenarios::Scenario = toml::from_str(rec.rig_metadata("scenario_toml")?).ok()?;
     (s.egm.enabled && s.trajectory.force_ref_along_z.is_empty()).then_some(s.trajectory.force_ref_n)
 }
 

@@ -17,7 +17,7 @@ fn main() {
     let cfg = SceneConfig {
         rate_hz: 100.0,
         tool: robot::Tool::default(),
-        task_in_base: scenario::geometry::TaskFrame::from_scenario(&scenario::Scenario::default()).pose_in_base(),
+        task_in_base: scenarios::geometry::TaskFrame::from_scenario(&scenarios::Scenario::default()).pose_in_base(),
         strip: Some(StripGeometry {
             top_xyz_m: top,
             nodes_per_layer: 13,

@@ -312,7 +312,7 @@ pub fn scene_update(
         let mut arrow = entity("contact_force", "task");
         if f < 0.0 {
             let len = -f * ARROW_M_PER_N;
-            let top = scenario::geometry::STRIP_TOP_HEIGHT_M + s.top_displacement_m;
+            let top = scenarios::geometry::STRIP_TOP_HEIGHT_M + s.top_displacement_m;
             // The arrow points along its pose's +x: turned to -y (pressing).
             let rot = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), -std::f64::consts::FRAC_PI_2);
             let iso = Isometry3::from_parts(nalgebra::Translation3::new(0.0, top + len, s.wheel_z_m), rot);

@@ -1,6 +1,6 @@
 //! The rig's tool-down pose (DESIGN section 3): the tool points straight down with the wheel axis
 //! along base y, across a strip that runs along base +x, and the IK seed of that branch. Where
-//! the strip lies is the scenario's (`scenario::geometry`).
+//! the strip lies is the scenario's (`scenarios::geometry`).
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 

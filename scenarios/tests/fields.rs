@@ -2,13 +2,13 @@
 //! the table, every field refuses bad values with a message naming file, line and field, the
 //! ranges end where the table says, and `scenarios/README.md` prints the table as it is.
 //!
-//! `UPDATE_README=1 cargo test -p scenario --test fields` rewrites the README's field table.
+//! `UPDATE_README=1 cargo test -p scenarios --test fields` rewrites the README's field table.
 
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use scenario::fields::{self, Field, Kind, Limit, Range, FIELDS};
-use scenario::{Place, Scenario, ScenarioError, MAX_FORCE_POINTS};
+use scenarios::fields::{self, Field, Kind, Limit, Range, FIELDS};
+use scenarios::{Place, Scenario, ScenarioError, MAX_FORCE_POINTS};
 
 const FILE: &str = "walk/bad.toml";
 
@@ -322,7 +322,7 @@ fn a_missing_file_names_the_file_and_leaves_the_os_error_to_the_chain() {
     assert!(cause.contains("os error 2"), "{cause}");
 }
 
-const BEGIN: &str = "<!-- fields: generated from scenarios/src/fields.rs; UPDATE_README=1 cargo test -p scenario --test fields -->\n";
+const BEGIN: &str = "<!-- fields: generated from scenarios/src/fields.rs; UPDATE_README=1 cargo test -p scenarios --test fields -->\n";
 const END: &str = "<!-- end of fields -->\n";
 
 #[test]
@@ -352,7 +352,7 @@ fn the_readme_lists_every_field_as_the_table_says() {
             .map(|(want, have)| format!("- {have}\n+ {want}"))
             .collect();
         panic!(
-            "scenarios/README.md's field table is stale ({} lines differ, or the length); regenerate it with UPDATE_README=1 cargo test -p scenario --test fields\n{}",
+            "scenarios/README.md's field table is stale ({} lines differ, or the length); regenerate it with UPDATE_README=1 cargo test -p scenarios --test fields\n{}",
             diff.len(),
             diff.join("\n")
         );

@@ -46,7 +46,7 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> anyhow::Result<()> {
-    let s = scenario::Scenario::load(&args.scenario)?;
+    let s = scenarios::Scenario::load(&args.scenario)?;
     let sock = UdpSocket::bind(&s.egm.sensor_address)
         .map_err(|e| anyhow::anyhow!("binding the EGM sensor address {}: {e}", s.egm.sensor_address))?;
     sock.set_read_timeout(Some(Duration::from_millis(100)))?;

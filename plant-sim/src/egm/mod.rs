@@ -38,7 +38,7 @@ use std::time::Duration;
 use egm::pb;
 use messages::{JointState, JointTorque, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
 use robot::{Robot, Vec6};
-use scenario::{Mode, Scenario};
+use scenarios::{Mode, Scenario};
 
 use crate::limits::ReflexLimits;
 use crate::physics::Physics;
@@ -90,7 +90,7 @@ impl EgmParams {
 /// The servo's model: the scenario's arm and tool, armature and friction, without the plant's
 /// inertia mismatch (`robot.plant_inertia_scale`).
 pub fn servo_model(s: &Scenario) -> Robot {
-    Robot::irb2400_with_tool(scenario::geometry::tool(s))
+    Robot::irb2400_with_tool(scenarios::geometry::tool(s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms))
 }

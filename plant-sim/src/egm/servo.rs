@@ -24,7 +24,7 @@
 //! Nothing here allocates: it runs on the 1 kHz path.
 
 use robot::{Robot, Vec6};
-use scenario::Scenario;
+use scenarios::Scenario;
 
 /// The longest delay line, ticks (1 s at 1 kHz; `egm.lag_s` is at most 1 s).
 pub const MAX_DELAY_TICKS: usize = 1001;

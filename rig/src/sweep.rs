@@ -42,14 +42,14 @@ pub fn parse_axis(s: &str) -> anyhow::Result<Axis> {
 }
 
 /// `--set` as the command line gives it: `parse_axis`, and the field must be one of the
-/// scenario's (`scenario::fields::FIELDS`), so that a typo is refused before anything is written.
+/// scenario's (`scenarios::fields::FIELDS`), so that a typo is refused before anything is written.
 pub fn parse_set(s: &str) -> anyhow::Result<Axis> {
     let a = parse_axis(s)?;
     let key = format!("{}.{}", a.section, a.field);
-    if scenario::fields::field(&key).is_none() {
-        let names = scenario::fields::names_in(&a.section);
+    if scenarios::fields::field(&key).is_none() {
+        let names = scenarios::fields::names_in(&a.section);
         if names.is_empty() {
-            let sections: Vec<String> = scenario::fields::sections().iter().filter(|s| !s.is_empty()).map(|s| format!("[{s}]")).collect();
+            let sections: Vec<String> = scenarios::fields::sections().iter().filter(|s| !s.is_empty()).map(|s| format!("[{s}]")).collect();
             anyhow::bail!("--set {s:?}: no scenario section [{}]; the sections are {}", a.section, sections.join(", "));
         }
         anyhow::bail!("--set {s:?}: no scenario field {key}; [{}] has {}", a.section, names.join(", "));
@@ -61,7 +61,7 @@ pub fn parse_set(s: &str) -> anyhow::Result<Axis> {
 /// the field (`flags`: field key and how the command line said it, e.g. ("bulge.height_mm",
 /// "--set bulge.height_mm=100")), or on all of them when the bad field is another one that they
 /// made invalid (z_end_mm beyond a shortened strip).
-pub fn blame_flags(e: scenario::ScenarioError, flags: &[(String, String)]) -> anyhow::Error {
+pub fn blame_flags(e: scenarios::ScenarioError, flags: &[(String, String)]) -> anyhow::Error {
     let field = e.field().map(|f| f.split(['[', ' ']).next().unwrap_or(f).to_string());
     let culprit = flags.iter().find(|(key, _)| field.as_deref() == Some(key.as_str()));
     let context = match culprit {
@@ -209,7 +209,7 @@ pub fn table(results: &[CaseResult]) -> String {
 
 /// Reads a base scenario as a TOML table (validated as a scenario first, so errors name it).
 pub fn load_base(path: &Path) -> anyhow::Result<toml::Table> {
-    scenario::Scenario::load(path)?;
+    scenarios::Scenario::load(path)?;
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     text.parse().with_context(|| format!("parsing {}", path.display()))
 }
@@ -228,7 +228,7 @@ pub fn write_overridden(base_path: &Path, set: &[Axis], out: &Path) -> anyhow::R
         std::fs::create_dir_all(dir).with_context(|| format!("--out {}: creating the output directory", dir.display()))?;
     }
     std::fs::write(out, toml::to_string(&doc)?).with_context(|| format!("writing {}", out.display()))?;
-    scenario::Scenario::load(out).map_err(|e| blame_flags(e, &set_flags(set, &case)))?;
+    scenarios::Scenario::load(out).map_err(|e| blame_flags(e, &set_flags(set, &case)))?;
     Ok(out.to_path_buf())
 }
 
@@ -248,7 +248,7 @@ impl SharedStrips {
 
     /// The plant's physics of `s`, its strip tables shared. Cases with the same strip wait for
     /// the first to build them instead of building them twice.
-    pub fn physics(&self, s: &scenario::Scenario) -> anyhow::Result<plant_sim::physics::Physics> {
+    pub fn physics(&self, s: &scenarios::Scenario) -> anyhow::Result<plant_sim::physics::Physics> {
         if !s.strip.enabled {
             return plant_sim::physics::Physics::with_strip_tables(s, None);
         }
@@ -401,15 +401,15 @@ mod tests {
 
     #[test]
     fn rig_run_overrides_are_written_and_checked() {
-        let base = scenario::Scenario::default_file();
+        let base = scenarios::Scenario::default_file();
         let dir = std::env::temp_dir().join(format!("rig-run-set-{}", std::process::id()));
         let out = dir.join("scenario.toml");
         let set = vec![parse_axis("trajectory.force_ref_n=-12.5").unwrap(), parse_axis("controller.force_integral=false").unwrap()];
         let p = write_overridden(&base, &set, &out).unwrap();
-        let s = scenario::Scenario::load(&p).unwrap();
+        let s = scenarios::Scenario::load(&p).unwrap();
         assert_eq!((s.trajectory.force_ref_n, s.controller.force_integral), (-12.5, false));
         // everything else is the base scenario's
-        let b = scenario::Scenario::load(&base).unwrap();
+        let b = scenarios::Scenario::load(&base).unwrap();
         assert_eq!((s.bulge, s.loop_.substeps, s.trajectory.roll_s), (b.bulge, b.loop_.substeps, b.trajectory.roll_s));
         let e = write_overridden(&base, &[parse_axis("bulge.height_mm=0.1,0.2").unwrap()], &out).unwrap_err().to_string();
         assert!(e.contains("bulge.height_mm") && e.contains("one value"), "{e}");

@@ -1,6 +1,6 @@
 //! End-to-end over EGM: the real `plant-sim` as an ABB robot controller (`[egm] enabled`) and a
 //! real third-party EGM client, `abb-robot-client`'s `abb_robot_client.egm.EGM` (Python, unchanged;
-//! `tests/python/egm_client.py` drives it), over UDP on a port of each test's own. Build first:
+//! `rig-tests/python/egm_client.py` drives it), over UDP on a port of each test's own. Build first:
 //! `cargo build --release --workspace --bins`; needs `pip install abb-robot-client` (the tests
 //! fail without it; `.ci/deps` installs it).
 
@@ -112,7 +112,7 @@ fn abb_robot_client_reads_the_rigs_joints_holds_then_steps_axis_6_with_the_docum
 
     // What the client reads is the rig's state in ABB's convention: joints against the recorded
     // q of the same tick, the TCP position against forward kinematics of it.
-    let s = scenario::Scenario::load(&rig.scenario).unwrap();
+    let s = scenarios::Scenario::load(&rig.scenario).unwrap();
     let model = plant_sim::physics::plant_robot(&s);
     for e in log {
         let tick = e["tm"].as_u64().unwrap();
@@ -285,7 +285,7 @@ fn egm_thesis_run_in_lockstep_is_bit_identical_and_within_the_designs_bound() {
         assert_eq!(bits(&a.wrench[k].force), bits(&b.wrench[k].force), "wrench differs at row {k}");
         assert_eq!(a.strip[k].bottom_force_n.to_bits(), b.strip[k].bottom_force_n.to_bits(), "bottom force differs at row {k}");
     }
-    let s = scenario::Scenario::load(&sc).unwrap();
+    let s = scenarios::Scenario::load(&sc).unwrap();
     let roll = recording_tools::report::numbers(&a).rolling.expect("the wheel rolled");
     let (max, rms) = (roll.force_error_max_abs_n.unwrap(), roll.force_error_rms_n.unwrap());
     assert!(roll.rolled_length_m > 0.0359, "rolled {} m", roll.rolled_length_m);

@@ -1,4 +1,4 @@
-//! Helpers for the end-to-end tests in `tests/tests/`: locate the built binaries, give every test
+//! Helpers for the end-to-end tests in `rig-tests/tests/`: locate the built binaries, give every test
 //! its own rig name and temporary directory, write small scenarios, and start daemons under a
 //! guard that kills them if a test fails.
 //!

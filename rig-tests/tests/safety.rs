@@ -3,7 +3,7 @@
 //! exit status and a dead controller under `rig run`. Build first:
 //! `cargo build --release --workspace --bins`.
 //!
-//! The misbehaving controller is `fault-controller` (tests/src/bin/fault_controller.rs). `rig run
+//! The misbehaving controller is `fault-controller` (rig-tests/src/bin/fault_controller.rs). `rig run
 //! --controller` takes a path without arguments, so its faults are given through a wrapper script
 //! (`exec fault-controller FAULTS "$@"`).
 //!
@@ -211,7 +211,7 @@ fn an_end_stop_holds_a_joint_driven_into_it() {
     let last = rec.joint_state.last().unwrap();
     let top_speed = rec.joint_state.iter().map(|s| s.qd[j].abs()).fold(0.0, f64::max);
     // What the joint pushes the stop with at the end: the applied torque less gravity.
-    let s = scenario::Scenario::load(&t.scenario).unwrap();
+    let s = scenarios::Scenario::load(&t.scenario).unwrap();
     let arm = robot::Robot::irb2400_with_tool(robot::Tool::wheel_on_bracket(
         s.robot.tool_mass_kg,
         s.robot.tool_offset_m,

@@ -201,7 +201,7 @@ fn hertz(s: &str) -> Result<f64, String> {
 
 /// `--live ADDR` must be free to listen on before anything starts (the plant binds it again
 /// itself; a port taken in between fails the plant with the same message).
-fn check_live(live: &recordings::LiveConfig, s: &scenario::Scenario, path: &Path) -> anyhow::Result<()> {
+fn check_live(live: &recordings::LiveConfig, s: &scenarios::Scenario, path: &Path) -> anyhow::Result<()> {
     anyhow::ensure!(
         s.recording.enabled,
         "--live: the live view is fed by the recorder, and {} disables the recording (recording.enabled = false)",
@@ -212,7 +212,7 @@ fn check_live(live: &recordings::LiveConfig, s: &scenario::Scenario, path: &Path
 
 /// A run length from the command line must give the plant at least one tick of the scenario's
 /// period (`flag` names it in the message).
-fn check_duration(flag: &str, duration_s: Option<f64>, s: &scenario::Scenario, path: &Path) -> anyhow::Result<()> {
+fn check_duration(flag: &str, duration_s: Option<f64>, s: &scenarios::Scenario, path: &Path) -> anyhow::Result<()> {
     if let Some(d) = duration_s {
         let period = s.loop_.period_s;
         anyhow::ensure!(d >= period, "{flag} {d}: shorter than one control period (loop.period_s = {period} s in {})", path.display());
@@ -260,7 +260,7 @@ fn prepare(
     live: Option<recordings::LiveConfig>,
 ) -> anyhow::Result<RigLaunch> {
     // Fail early, with file/line/field, before any process starts.
-    let parsed = scenario::Scenario::load(&scenario)?;
+    let parsed = scenarios::Scenario::load(&scenario)?;
     check_duration(duration_flag, duration_s, &parsed, &scenario)?;
     if let Some(l) = &live {
         check_live(l, &parsed, &scenario)?;
@@ -276,7 +276,7 @@ fn prepare(
     }
     let lockstep = match mode.as_deref() {
         Some(m) => m == "lockstep",
-        None => parsed.loop_.mode == scenario::Mode::Lockstep,
+        None => parsed.loop_.mode == scenarios::Mode::Lockstep,
     };
     let dir = out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
     std::fs::create_dir_all(&dir).with_context(|| format!("--out {}: creating the output directory", dir.display()))?;
@@ -372,7 +372,7 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
 /// The timing scenario: the default one without the strip, holding the start pose (no approach),
 /// in real-time mode, written next to the recording.
 fn timing_scenario(dir: &Path, a: &TimingArgs) -> anyhow::Result<PathBuf> {
-    let default = scenario::Scenario::default_file();
+    let default = scenarios::Scenario::default_file();
     let text = std::fs::read_to_string(&default).with_context(|| format!("reading {}", default.display()))?;
     let mut doc: toml::Table = text.parse().with_context(|| format!("parsing {}", default.display()))?;
     let table = |doc: &mut toml::Table, k: &str| -> toml::Table { doc.remove(k).and_then(|v| v.as_table().cloned()).unwrap_or_default() };
@@ -404,7 +404,7 @@ fn timing_scenario(dir: &Path, a: &TimingArgs) -> anyhow::Result<PathBuf> {
 
 /// `rig run --mode lockstep --in-process`: the run in this process, summarised as `rig run` does.
 fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Path) -> anyhow::Result<i32> {
-    let parsed = scenario::Scenario::load(scenario)?;
+    let parsed = scenarios::Scenario::load(scenario)?;
     check_duration("--duration", duration_s, &parsed, scenario)?;
     std::fs::create_dir_all(dir).with_context(|| format!("--out {}: creating the output directory", dir.display()))?;
     plant_sim::rt::install_stop_signals();
@@ -433,7 +433,7 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
 /// every case reached its end but some with a safe stop, reflex, refused torque or an incomplete
 /// recording, 1 if a case failed, 130/143 if the sweep was interrupted.
 fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
-    let base_path = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
+    let base_path = a.scenario.unwrap_or_else(scenarios::Scenario::default_file);
     let base = sweep::load_base(&base_path)?;
     let dir = a.launch.out.unwrap_or_else(|| Path::new("runs").join(format!("sweep-{}", utc_stamp())));
     let cases = sweep::cases(&a.axes, a.grid);
@@ -449,7 +449,7 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
         let mut flags = sweep::set_flags(&a.axes, case);
         flags.extend(sweep::set_scene_rate(&mut doc, &a.axes, a.scene_rate));
         std::fs::write(&path, toml::to_string(&doc)?).with_context(|| format!("writing {}", path.display()))?;
-        let s = scenario::Scenario::load(&path).map_err(|e| sweep::blame_flags(e, &flags))?;
+        let s = scenarios::Scenario::load(&path).map_err(|e| sweep::blame_flags(e, &flags))?;
         check_duration("--duration", a.launch.duration, &s, &path)?;
         planned.push((case_dir, path, label));
     }
@@ -548,7 +548,7 @@ fn main() {
     let result = match cli.cmd {
         Cmd::Run(a) => (|| {
             let rig = supervise::unique_rig_name();
-            let mut scenario = a.scenario.unwrap_or_else(scenario::Scenario::default_file);
+            let mut scenario = a.scenario.unwrap_or_else(scenarios::Scenario::default_file);
             let dir = a.launch.out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
             if !a.set.is_empty() {
                 scenario = sweep::write_overridden(&scenario, &a.set, &dir.join("scenario.toml"))?;
@@ -585,7 +585,7 @@ fn main() {
                     .into_iter()
                     .filter_map(|(key, flag, v)| v.map(|us| (key.to_string(), format!("{flag} {us}"))))
                     .collect();
-                    scenario::Scenario::load(&path).map_err(|e| sweep::blame_flags(e, &flags))?;
+                    scenarios::Scenario::load(&path).map_err(|e| sweep::blame_flags(e, &flags))?;
                     path
                 }
             };

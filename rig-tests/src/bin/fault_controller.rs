@@ -21,7 +21,7 @@
 //! It never acknowledges a reflex: it always sends `controller_status` = 0 (active), so a reflex
 //! holds to the end of the run. It exits 0 on the plant's `shutting_down`, and with an error when
 //! the plant's node is dead or the plant is silent for `loop.peer_stall_timeout_s`.
-//! It links only `messages`, `robot` and `scenario`.
+//! It links only `messages`, `robot` and `scenarios`.
 
 use std::time::{Duration, Instant};
 
@@ -129,7 +129,7 @@ struct Drive {
 }
 
 fn run(a: &Args) -> anyhow::Result<u64> {
-    let s = scenario::Scenario::load(&a.scenario)?;
+    let s = scenarios::Scenario::load(&a.scenario)?;
     let tool = robot::Tool::wheel_on_bracket(s.robot.tool_mass_kg, s.robot.tool_offset_m, s.robot.wheel_radius_mm * 1e-3);
     let robot = robot::Robot::irb2400_with_tool(tool)
         .with_armature(Vec6::from(s.robot.armature_kgm2))

@@ -47,8 +47,8 @@ fn main() {
 }
 
 fn run(a: &Args) -> anyhow::Result<()> {
-    let s = scenario::Scenario::load(&a.scenario)?;
-    let robot = robot::Robot::irb2400_with_tool(scenario::geometry::tool(&s))
+    let s = scenarios::Scenario::load(&a.scenario)?;
+    let robot = robot::Robot::irb2400_with_tool(scenarios::geometry::tool(&s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms));
     messages::ports::clean_dead_nodes();

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Does a connected live view cost the 1 kHz loop anything? Interleaved `rig timing` runs on this
 # machine: "none" (no live view, as without --live) and "client" (--live on a loopback port with
-# tests/live/live_client.mjs subscribed to every channel for the whole run), one after the other,
+# rig-tests/live/live_client.mjs subscribed to every channel for the whole run), one after the other,
 # RUNS times each; prints round-trip p50/p99/max, misses and the live view's sent/dropped counts
 # of every run. The issue's bar: "client" no worse than the run-to-run spread of "none".
 #
-# usage: tests/live/measure.sh [SECONDS (60)] [RUNS (2)] [LIVE_RATE_HZ (100)]
+# usage: rig-tests/live/measure.sh [SECONDS (60)] [RUNS (2)] [LIVE_RATE_HZ (100)]
 # Needs the release binaries (cargo build --release --workspace --bins), node and `npm ci` here.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -15,7 +15,7 @@ rate=${3:-100}
 rig=target/release/rig
 out=$(mktemp -d /tmp/live-measure.XXXXXX)
 [ -x "$rig" ] || { echo "measure.sh: $rig missing: cargo build --release --workspace --bins" >&2; exit 1; }
-[ -d tests/live/node_modules/@foxglove/ws-protocol ] || { echo "measure.sh: run npm ci in tests/live" >&2; exit 1; }
+[ -d rig-tests/live/node_modules/@foxglove/ws-protocol ] || { echo "measure.sh: run npm ci in rig-tests/live" >&2; exit 1; }
 
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 
@@ -32,7 +32,7 @@ one() { # one() KIND N: one timing run, its summary JSON in $out/KIND-N.json
       (exec 3<>"/dev/tcp/127.0.0.1/$port") 2>/dev/null && break
       sleep 0.1
     done
-    (cd tests/live && node live_client.mjs "ws://127.0.0.1:$port" all $((seconds + 120))) >"$dir.client.json" 2>"$dir.client.err" &
+    (cd rig-tests/live && node live_client.mjs "ws://127.0.0.1:$port" all $((seconds + 120))) >"$dir.client.json" 2>"$dir.client.err" &
     local client_pid=$!
     wait "$rig_pid" || true
     wait "$client_pid" || echo "measure.sh: the live client of $kind-$n failed: $(cat "$dir.client.err")" >&2

@@ -3,7 +3,7 @@
 // connects to `rig run --live`, subscribes to every channel the server advertises, decodes every
 // message it receives and stops once /joint_state has spanned SECONDS of log time. Checks what it
 // can know by itself (every message decodes, ticks increase per channel, 6 joints, finite values)
-// and prints one JSON line for tests/tests/live_view.rs to compare with the recording.
+// and prints one JSON line for rig-tests/tests/live_view.rs to compare with the recording.
 //
 // usage: node live_client.mjs ws://127.0.0.1:PORT SECONDS|all [TIMEOUT_S]
 // (`all`: stay subscribed until the server closes at the end of the run; measure.sh uses it)

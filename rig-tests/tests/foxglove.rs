@@ -28,7 +28,7 @@ fn foxglove_libraries_read_the_robot_the_strip_and_the_timeline_of_a_real_run() 
     let rig = unique_rig("fox");
     let dir = temp_dir(&rig);
     let scenario_path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/default.toml");
-    let scenario = scenario::Scenario::load(&scenario_path).unwrap();
+    let scenario = scenarios::Scenario::load(&scenario_path).unwrap();
     let before = wall_ns();
     let mut plant = start_plant(&rig, &scenario_path, &dir, 3.6, &["--mode", "lockstep"]);
     let mut ctrl = start_controller("controller", "controller", &rig, &scenario_path, &dir, &[]);
@@ -40,7 +40,7 @@ fn foxglove_libraries_read_the_robot_the_strip_and_the_timeline_of_a_real_run() 
     assert_eq!(rec.joint_state.len(), 3600);
 
     // The robot crate's FK of the recorded q at every scene tick (every 10th at 100 Hz).
-    let tool = scenario::geometry::tool(&scenario);
+    let tool = scenarios::geometry::tool(&scenario);
     let robot = robot::Robot::irb2400_with_tool(tool);
     let every = (1.0 / (scenario.recording.scene_rate_hz * scenario.loop_.period_s)).round() as u64;
     let mut tcp = serde_json::Map::new();

@@ -2,7 +2,7 @@
 //! ([`plant_sim::PlantTick`]) and the controller's step ([`controller::Controller`]) in one
 //! thread, no daemons, no iceoryx2, recorded through the same writer as the plant's. Transport is
 //! transparent: every state, wrench and torque is bit-identical to the daemons' lockstep run of
-//! the same scenario (tests/tests/tick_identity.rs, sweep.rs).
+//! the same scenario (rig-tests/tests/tick_identity.rs, sweep.rs).
 
 use std::path::Path;
 use std::time::Instant;
@@ -14,7 +14,7 @@ use plant_sim::run::{nominal_duration_s, open_recorder_with, RecordingAbout, Run
 use plant_sim::stats::LoopStats;
 use plant_sim::PlantTick;
 use recordings::TimingRecord;
-use scenario::{Mode, Scenario};
+use scenarios::{Mode, Scenario};
 
 /// `controller_id` of the in-process controller (no process to name it after).
 const IN_PROCESS_CONTROLLER_ID: u64 = 1;

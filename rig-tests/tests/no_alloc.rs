@@ -13,7 +13,7 @@ use plant_sim::physics::Physics;
 use plant_sim::recording::TimingRecord;
 use plant_sim::run::{open_recorder, RecordingAbout};
 use plant_sim::PlantTick;
-use scenario::{Mode, Scenario};
+use scenarios::{Mode, Scenario};
 
 struct Counting;
 

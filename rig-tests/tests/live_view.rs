@@ -1,11 +1,11 @@
 //! End-to-end tests of the live view (issue 14): `rig run --live` on a loopback port, and a
-//! Foxglove WebSocket client built from Foxglove's own npm libraries (`tests/live/live_client.mjs`:
+//! Foxglove WebSocket client built from Foxglove's own npm libraries (`rig-tests/live/live_client.mjs`:
 //! `@foxglove/ws-protocol`, `@foxglove/rosmsg2-serialization`) that subscribes while the run goes
 //! on. What the client received is checked against the run's own recording, read back with the
 //! `mcap` crate: the advertised channels are the file's channels, the decoded joint states are the
 //! recorded ones, at the requested rate.
 //!
-//! Needs `node` and `npm ci` in `tests/live` (`.ci/run` does it); without them the tests fail.
+//! Needs `node` and `npm ci` in `rig-tests/live` (`.ci/run` does it); without them the tests fail.
 //! Build first: `cargo build --release --workspace --bins`. The tests run one at a time (real
 //! time on a 2-core machine).
 
@@ -26,7 +26,7 @@ fn serial() -> MutexGuard<'static, ()> {
     SERIAL.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// `tests/live`, with its npm packages installed (fails, not skips, without them).
+/// `rig-tests/live`, with its npm packages installed (fails, not skips, without them).
 fn live_dir() -> PathBuf {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("live");
     let node = Command::new("node").arg("--version").output();

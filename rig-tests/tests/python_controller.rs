@@ -47,8 +47,8 @@ fn python_controller_holds_the_arm_in_lockstep_with_gravity_equal_to_the_rust_mo
     // Independent check of the Python model: at tick 0, qd = 0 and e = 0, so tau = g(q0), which
     // must equal the Rust `robot` crate's gravity torque of the plant's tool-equipped arm.
     assert_eq!(rec.joint_state[0].qd, [0.0; 6], "the plant starts at rest");
-    let s = scenario::Scenario::load(&t.scenario).unwrap();
-    let robot = robot::Robot::irb2400_with_tool(scenario::geometry::tool(&s))
+    let s = scenarios::Scenario::load(&t.scenario).unwrap();
+    let robot = robot::Robot::irb2400_with_tool(scenarios::geometry::tool(&s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms));
     let g = robot.gravity_torque(&q0);

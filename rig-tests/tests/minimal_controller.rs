@@ -76,8 +76,8 @@ fn minimal_controller_answers_every_tick_and_holds_the_arm_then_exits_0_on_the_g
     // the plant's hold (gravity compensation + damping) does the holding and nothing speeds the
     // arm up: it coasts at most |qd| N T. After the blend u stays put and the critically damped
     // PD (omega = 2 pi 10 rad/s, the script's gains) stops it within a further |qd|/(omega e).
-    let s = scenario::Scenario::load(&t.scenario).unwrap();
-    let robot = robot::Robot::irb2400_with_tool(scenario::geometry::tool(&s))
+    let s = scenarios::Scenario::load(&t.scenario).unwrap();
+    let robot = robot::Robot::irb2400_with_tool(scenarios::geometry::tool(&s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms));
     let q0 = Vec6::from(s0.q);

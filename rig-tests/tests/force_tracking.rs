@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use recording_tools::read::Recording;
 use rig_tests::*;
-use scenario::Scenario;
+use scenarios::Scenario;
 
 fn scenario_file(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("scenarios").join(name)
