@@ -57,7 +57,7 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
     )
     .unwrap();
     std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
-    let mut run = rig_timing(&dir, "6", Some(&script));
+    let mut run = rig_timing(&dir, "12", Some(&script));
     let st = run.expect_exit(Duration::from_secs(120));
     let out = run.stdout();
     assert!(st.success(), "rig timing: {st}\n{out}\n{}", run.stderr());
@@ -78,7 +78,11 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
     // shared host; there the host came first, and the test did not make that.
     // So is a tick the controller woke for later than its wake share after the publish (the
     // stamps say so): a wake-up held up by the host or another rig's real-time threads on this
-    // machine is a cause of its own, and the test only delayed the compute.
+    // machine is a cause of its own, and the test only delayed the compute. And so is a tick in
+    // which the plant itself woke for its budget's end more than a host stall late: the host
+    // stalled the plant's CPU then, and the probe's report, merged over the CPUs, shows that
+    // stall in the controller's compute as well (seen on 2026-12-02: 165 us late, a 503 us stall),
+    // or the plant, woken late, found the late torque already there and took it.
     let plant_late = |k: u64| {
         let s = rec.timing.iter().find(|t| t.tick == k).and_then(|t| t.timing.stages);
         let own = s.and_then(|s| s.controller);
@@ -97,14 +101,44 @@ fn a_controller_sleeping_700_us_every_100th_tick_gets_exactly_those_misses_as_it
             s.skipped_periods > 0
                 || s.budget_end_ns - s.plant_woke_ns < s.torque_budget_ns as i64
                 || woke_after_publish > (recording_tools::attribution::WAKE_SHARE * s.torque_budget_ns as f64) as i64
+                || s.torque_received_ns - s.budget_end_ns > recording_tools::attribution::HOST_STALL_NS as i64
         })
     };
+    // And so, last, is a tick in whose compute window (woke to handed over) the probe saw a host
+    // stall: the probe's report merges both CPUs, so the attribution cannot tell a stall of the
+    // controller's CPU, which stretched its compute, from one of the CPU the sleeping plant left
+    // idle; the rule gives such a tick to the host when the stall covers the overrun. The test
+    // made neither; the unit tests of `attribution` hold that rule to known stalls.
+    let stalls: Vec<(i64, i64)> = rec
+        .timing
+        .iter()
+        .filter_map(|t| t.timing.stages)
+        .filter(|o| o.probe && o.probe_late_ns >= recording_tools::attribution::HOST_STALL_NS)
+        .map(|o| {
+            let at = o.deadline_since_start_ns as i64 + o.probe_stall_from_ns;
+            (at, at + o.probe_late_ns as i64)
+        })
+        .collect();
+    let stall_in_compute = |k: u64| {
+        let Some(s) = rec.timing.iter().find(|t| t.tick == k).and_then(|t| t.timing.stages) else { return false };
+        let d = s.deadline_since_start_ns as i64;
+        let window = s.controller.map(|c| (d + c.woke_ns, d + c.published_ns)).or_else(|| {
+            rec.timing.iter().filter_map(|t| t.timing.stages).find_map(|n| {
+                n.late
+                    .filter(|l| l.0 == k)
+                    .map(|(_, c)| (n.deadline_since_start_ns as i64 + c.woke_ns, n.deadline_since_start_ns as i64 + c.published_ns))
+            })
+        });
+        window.is_some_and(|(a, b)| stalls.iter().any(|&(from, to)| from < b && to > a))
+    };
     let every_100th: Vec<u64> = (first + 1..=last).filter(|&k| k % 100 == 0).collect();
-    let delayed: Vec<u64> = every_100th.iter().copied().filter(|&k| stamped(k) && !plant_late(k)).collect();
+    let seen: Vec<u64> = every_100th.iter().copied().filter(|&k| stamped(k) && !plant_late(k)).collect();
+    let delayed: Vec<u64> = seen.iter().copied().filter(|&k| !stall_in_compute(k)).collect();
     eprintln!(
-        "{} of {} 100th ticks delayed (the rest unseen by the controller, published late or woken for late)",
+        "{} of {} 100th ticks delayed without a host stall in them ({} more had one; the rest unseen by the controller, published late or woken for late)",
         delayed.len(),
-        every_100th.len()
+        every_100th.len(),
+        seen.len() - delayed.len()
     );
     assert!(delayed.len() >= 40, "{} delayed ticks from tick {first} to {last}", delayed.len());
     let mut wrong = Vec::new();
@@ -187,11 +221,12 @@ fn a_100_ms_stall_of_both_daemons_is_a_host_burst_and_the_run_completes() {
         .expect("a skip after the stall");
     let skipped = after.timing.stages.unwrap().skipped_periods;
     assert!((90..=400).contains(&skipped), "{skipped} periods skipped after a 100 ms stop");
-    // The burst starts at the tick the stop caught (it woke 100 ms late) or at the one after it.
+    // A burst holds the tick the stop caught (it woke 100 ms late) or starts at the one after it;
+    // it may begin a few ticks earlier when a stall of the host just before the stop joins it.
     let burst = a
         .bursts
         .iter()
-        .find(|b| b.tick >= stall_tick.saturating_sub(1) && b.tick <= after.tick)
+        .find(|b| b.tick <= after.tick && b.tick + b.periods >= stall_tick)
         .unwrap_or_else(|| panic!("no host burst from tick {stall_tick} to {}: {:?}", after.tick, a.bursts));
     assert!(burst.periods >= u64::from(skipped), "{burst:?}");
     assert!(out.contains(&format!("host burst: {} periods lost from tick {}", burst.periods, burst.tick)), "{out}");
