@@ -174,9 +174,33 @@ impl CpuReport {
     }
 }
 
+/// The `/events` entry a run with the probe ends with: how many stalls each CPU's probe saw
+/// and the worst wake-up, so the recording itself says how much the host took (the summary
+/// JSON and `rig timing` print the distributions).
+pub fn summary_text(cpus: &[CpuReport]) -> String {
+    let total: u64 = cpus.iter().map(|c| c.stalls).sum();
+    let each: Vec<String> = cpus.iter().map(|c| format!("CPU {} {}", c.cpu, c.stalls)).collect();
+    let longest = cpus.iter().max_by_key(|c| c.latency.max_ns());
+    let longest =
+        longest.map_or(String::new(), |c| format!("; the worst wake-up {:.3} ms late (CPU {})", c.latency.max_ns() as f64 * 1e-6, c.cpu));
+    format!("host probe: {total} stalls (wake-ups {} µs or more late): {}{longest}", HOST_STALL_NS / 1000, each.join(", "))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_summary_names_each_cpus_stalls_and_the_worst_wake_up() {
+        let report = |cpu, stalls, late: &[u64]| {
+            let mut latency = Histogram::for_latency();
+            late.iter().for_each(|&l| latency.record(l));
+            CpuReport { cpu, period_ns: 250_000, pinned: true, sched_fifo: true, latency, stalls, recent_stalls: Vec::new() }
+        };
+        let text = summary_text(&[report(0, 3, &[5_000, 120_000, 2_500_000]), report(1, 1, &[7_000, 150_000])]);
+        assert!(text.starts_with("host probe: 4 stalls (wake-ups 100 µs or more late): CPU 0 3, CPU 1 1; the worst wake-up 2."), "{text}");
+        assert!(text.ends_with(" ms late (CPU 0)"), "{text}");
+    }
 
     #[test]
     fn the_probe_wakes_on_its_grid_and_reports_every_wake_up() {

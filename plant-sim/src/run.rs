@@ -338,6 +338,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         (stats, None)
     };
     let probe = probe.map(crate::probe::Probe::finish);
+    if let (Some(r), Some(cpus)) = (recorder.as_mut(), probe.as_ref()) {
+        r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Info, &crate::probe::summary_text(cpus)));
+    }
     if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone()) {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
     }

@@ -343,10 +343,13 @@ pub fn log_level(kind: EventKind) -> log::Level {
 
 /// `/events` entry as `foxglove.Log`: name = the kind's name, message = "tick N: text".
 pub fn log_message(e: &EventRecord, ns: u64) -> Log {
+    // The plant's event texts begin with their tick already; others get it.
+    let text = e.text();
+    let message = if text.starts_with(&format!("tick {}: ", e.tick)) { text.to_string() } else { format!("tick {}: {text}", e.tick) };
     Log {
         timestamp: Some(timestamp(ns)),
         level: log_level(e.kind) as i32,
-        message: format!("tick {}: {}", e.tick, e.text()),
+        message,
         name: e.kind.name().into(),
         file: String::new(),
         line: 0,
@@ -370,6 +373,14 @@ mod tests {
     use super::*;
 
     /// The cursor search gives what the plain one does, for ascending, repeated and falling x.
+    #[test]
+    fn a_log_message_names_its_tick_once() {
+        let miss = EventRecord::new(980, 0.98, EventKind::Miss, "tick 980: no valid torque in time, holding the last one");
+        assert_eq!(log_message(&miss, 0).message, "tick 980: no valid torque in time, holding the last one");
+        let probe = EventRecord::new(2000, 2.0, EventKind::Info, "host probe: 37 stalls");
+        assert_eq!(log_message(&probe, 0).message, "tick 2000: host probe: 37 stalls");
+    }
+
     #[test]
     fn interpolation_with_a_cursor_is_the_plain_interpolation() {
         let z = [0.0f32, 0.001, 0.002, 0.004, 0.008];

@@ -231,4 +231,11 @@ fn a_100_ms_stall_of_both_daemons_is_a_host_burst_and_the_run_completes() {
     assert!(burst.periods >= u64::from(skipped), "{burst:?}");
     assert!(out.contains(&format!("host burst: {} periods lost from tick {}", burst.periods, burst.tick)), "{out}");
     assert!(out.contains("rig: exit 0"), "{out}");
+    // The recording says what the probe saw: one /events entry at the end, whose worst wake-up is
+    // the stop's (the probe threads live in the stopped plant).
+    let probe: Vec<String> =
+        rec.events_of(recordings::EventKind::Info).map(|e| e.text.clone()).filter(|t| t.starts_with("host probe: ")).collect();
+    assert_eq!(probe.len(), 1, "{:?}", rec.events);
+    let worst_ms: f64 = probe[0].split("worst wake-up ").nth(1).and_then(|t| t.split(" ms late").next()).unwrap().parse().unwrap();
+    assert!((90.0..400.0).contains(&worst_ms), "{}", probe[0]);
 }
