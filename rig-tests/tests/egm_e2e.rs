@@ -196,43 +196,36 @@ fn a_repeated_sequence_number_is_refused_with_an_event() {
     );
 }
 
-#[test]
-fn an_out_of_range_reference_is_refused_with_an_event_and_the_arm_stays() {
+/// Runs the client in `mode` (a bad message at its 50th cycle, tick 200): the plant refuses exactly
+/// one message, with one `/events` entry starting `expected`, and the arm does not move. Returns
+/// the client's log (None without the Python package).
+fn refused_once_and_the_arm_stays(test: &str, tag: &str, mode: &str, expected: &str) -> Option<Vec<serde_json::Value>> {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let Some(run) = egm_run("egm_out_of_limit", "egm-limit", "out_of_limit", 0.3, "") else { return };
-    let (_rig, summary, rec, _log) = run.finish();
-    assert_eq!(summary["refusals"], 1, "{summary}");
-    let texts = events_text(&rec, EventKind::EgmRefused);
-    assert_eq!(texts.len(), 1, "{:?}", rec.events);
-    assert!(
-        texts[0].starts_with("tick 200: EGM sensor message refused: axis 3 reference 70.000 deg beyond its range -60 .. 65 deg"),
-        "{texts:?}"
-    );
-    let q0 = rec.joint_state[0].q;
-    let drift = rec.joint_state.iter().map(|s| (Vec6::from(s.q) - Vec6::from(q0)).amax()).fold(0.0, f64::max);
-    assert!(drift < 1e-6, "the refused reference moved the arm by {drift} rad");
-}
-
-#[test]
-fn a_reference_faster_than_the_axis_is_refused_with_an_event_and_the_arm_stays() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let Some(run) = egm_run("egm_too_fast", "egm-fast", "too_fast", 0.3, "") else { return };
+    let run = egm_run(test, tag, mode, 0.3, "")?;
     let (_rig, summary, rec, log) = run.finish();
     assert_eq!(summary["refusals"], 1, "{summary}");
     let texts = events_text(&rec, EventKind::EgmRefused);
     assert_eq!(texts.len(), 1, "{:?}", rec.events);
-    // 3 degrees in one 4 ms cycle is 750 deg/s; IRB 2400's axis 6 makes 450 deg/s.
-    assert!(
-        texts[0].starts_with(
-            "tick 200: EGM sensor message refused: axis 6 reference needs 750.0 deg/s within one cycle, the axis speed is 450 deg/s"
-        ),
-        "{texts:?}"
-    );
-    // The client went back to holding after the refused step, and those messages were taken.
-    assert!(log.len() > 60, "{} cycles", log.len());
+    assert!(texts[0].starts_with(expected), "{texts:?}");
     let q0 = rec.joint_state[0].q;
     let drift = rec.joint_state.iter().map(|s| (Vec6::from(s.q) - Vec6::from(q0)).amax()).fold(0.0, f64::max);
     assert!(drift < 1e-6, "the refused reference moved the arm by {drift} rad");
+    Some(log)
+}
+
+#[test]
+fn an_out_of_range_reference_is_refused_with_an_event_and_the_arm_stays() {
+    let expected = "tick 200: EGM sensor message refused: axis 3 reference 70.000 deg beyond its range -60 .. 65 deg";
+    refused_once_and_the_arm_stays("egm_out_of_limit", "egm-limit", "out_of_limit", expected);
+}
+
+#[test]
+fn a_reference_faster_than_the_axis_is_refused_with_an_event_and_the_arm_stays() {
+    // 3 degrees in one 4 ms cycle is 750 deg/s; IRB 2400's axis 6 makes 450 deg/s.
+    let expected = "tick 200: EGM sensor message refused: axis 6 reference needs 750.0 deg/s within one cycle, the axis speed is 450 deg/s";
+    let Some(log) = refused_once_and_the_arm_stays("egm_too_fast", "egm-fast", "too_fast", expected) else { return };
+    // The client went back to holding after the refused step, and those messages were taken.
+    assert!(log.len() > 60, "{} cycles", log.len());
 }
 
 /// `scenarios/egm.toml` with the sensor on `port`, written into `dir`.
