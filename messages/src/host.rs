@@ -235,6 +235,7 @@ fn check_shared_memory_at(dir: &Path) -> Result<(), HostError> {
     let c = std::ffi::CString::new(dir.as_os_str().as_encoded_bytes()).map_err(|_| shm_error(format!("{d}: bad path")))?;
     // SAFETY: statvfs fills the zeroed struct we own; c is a valid C string.
     let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: c is a valid NUL-terminated path and st a statvfs we own.
     if unsafe { libc::statvfs(c.as_ptr(), &mut st) } != 0 {
         return Err(shm_error(format!("cannot inspect {d} ({})", std::io::Error::last_os_error())));
     }

@@ -163,6 +163,7 @@ fn a_killed_and_an_interrupted_plant_leave_readable_files() {
         // grow rather than for a fixed time.
         wait_for_recording(&out, 256 * 1024, Duration::from_secs(120));
         std::thread::sleep(Duration::from_millis(2500));
+        // SAFETY: kill(2) on a pid we spawned; no memory is touched.
         unsafe { libc::kill(p.id() as i32, signal) };
         let status = wait(p, Duration::from_secs(20));
         let _ = wait(c, Duration::from_secs(10));

@@ -440,7 +440,7 @@ impl Recorder {
     /// Queues one event. Wait-free; returns false (and counts a drop) if the queue is full.
     #[inline]
     pub fn record_event(&mut self, e: &EventRecord) -> bool {
-        // SAFETY (of the write): `slot` points to the slot `push_small` reserved; a Kind::Event
+        // SAFETY: (the write) `slot` points to the slot `push_small` reserved; a Kind::Event
         // slot is read for `small.event` only.
         self.push_small(Kind::Event, |slot| unsafe { std::ptr::addr_of_mut!((*slot).small).write(MaybeUninit::new(Small { event: *e })) })
     }
@@ -449,7 +449,7 @@ impl Recorder {
     /// Wait-free; returns false (and counts a drop) if the queue is full.
     #[inline]
     pub fn record_egm(&mut self, e: &crate::EgmRecord) -> bool {
-        // SAFETY (of the write): as in record_event; a Kind::Egm slot is read for `small.egm` only.
+        // SAFETY: (the write) as in record_event; a Kind::Egm slot is read for `small.egm` only.
         self.push_small(Kind::Egm, |slot| unsafe { std::ptr::addr_of_mut!((*slot).small).write(MaybeUninit::new(Small { egm: *e })) })
     }
 
@@ -657,8 +657,10 @@ impl WriterThread {
                 let head = unsafe { slot.tick.assume_init() };
                 let n = head.strip.n_centreline as usize;
                 pressure.clear();
+                // SAFETY: record_tick wrote the first n_centreline pressures.
                 pressure.extend(slot.pressure_pa[..n].iter().map(|p| unsafe { p.assume_init() }));
                 top_uy.clear();
+                // SAFETY: record_tick wrote the first n_centreline top displacements.
                 top_uy.extend(slot.top_uy_m[..n].iter().map(|p| unsafe { p.assume_init() }));
                 Popped::Tick(head)
             }
@@ -1069,6 +1071,7 @@ fn os_error_name(e: &(dyn std::error::Error + 'static)) -> &'static str {
 fn free_bytes(path: &Path) -> Option<u64> {
     use std::os::unix::ffi::OsStrExt;
     let c = std::ffi::CString::new(path.as_os_str().as_bytes()).ok()?;
+    // SAFETY: a zeroed statvfs is a valid value of this plain C struct.
     let mut s: libc::statvfs = unsafe { std::mem::zeroed() };
     // SAFETY: c is NUL-terminated, s is a valid statvfs to fill.
     if unsafe { libc::statvfs(c.as_ptr(), &mut s) } != 0 {

@@ -30,20 +30,25 @@ fn count() {
     ALLOCATIONS.with(|n| n.set(n.get() + 1));
 }
 
+// SAFETY: every method forwards to System, which upholds the GlobalAlloc contract.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         count();
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
         unsafe { System.alloc(layout) }
     }
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         count();
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
         unsafe { System.alloc_zeroed(layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         count();
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
         unsafe { System.dealloc(ptr, layout) }
     }
 }

@@ -197,11 +197,13 @@ fn a_100_ms_stall_of_both_daemons_is_a_host_burst_and_the_run_completes() {
     std::thread::sleep(Duration::from_millis(2000));
     let stopped_at = wall_ns();
     // SAFETY: signalling processes this test's rig started.
+    // SAFETY: kill(2) on pids of processes this test spawned.
     unsafe {
         libc::kill(plant, libc::SIGSTOP);
         libc::kill(ctrl, libc::SIGSTOP);
     }
     std::thread::sleep(Duration::from_millis(100));
+    // SAFETY: kill(2) on pids of processes this test spawned.
     unsafe {
         libc::kill(ctrl, libc::SIGCONT);
         libc::kill(plant, libc::SIGCONT);

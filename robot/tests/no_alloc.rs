@@ -16,12 +16,15 @@ fn allocations() -> usize {
     ALLOCATIONS.with(Cell::get)
 }
 
+// SAFETY: every method forwards to System, which upholds the GlobalAlloc contract.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         ALLOCATIONS.with(|n| n.set(n.get() + 1));
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
         unsafe { System.dealloc(ptr, layout) }
     }
 }
