@@ -7,6 +7,8 @@
 //! - `rig sweep [SCENARIO.toml] --set section.field=v1,v2,... [--grid]`: a parameter study, one
 //!   in-process lockstep run per case, several at once across the cores, tabulated from the
 //!   recordings.
+//! - `rig study run|case|status|collect`: a Monte Carlo study from a study file, in process on
+//!   every core or as a Slurm job array (`study/`).
 //! - `rig robot ...`, `rig model ...`, `rig replay`, `rig report`, `rig compare`, `rig design`: the tools of the
 //!   robot, strip, recording-tools and design crates.
 //!
@@ -14,6 +16,7 @@
 //! a refusal names the flag (and the file, line and field of a scenario value).
 
 mod in_process;
+mod study;
 mod summary;
 mod supervise;
 mod sweep;
@@ -39,6 +42,12 @@ enum Cmd {
     Timing(TimingArgs),
     /// Parameter study: one lockstep run per case (scenario fields overridden), one table.
     Sweep(SweepArgs),
+    /// Monte Carlo robustness study from a study file: pass rate, percentiles, worst cases, on
+    /// this machine's cores or a Slurm cluster.
+    Study {
+        #[command(subcommand)]
+        cmd: study::cli::StudyCmd,
+    },
     /// Robot model tools.
     Robot {
         #[command(subcommand)]
@@ -596,6 +605,7 @@ fn main() {
             launch_and_report(&l, true, a.json.as_deref())
         })(),
         Cmd::Sweep(a) => run_sweep(a),
+        Cmd::Study { cmd } => study::cli::run(cmd, utc_stamp),
         Cmd::Robot { cmd } => robot::cli::run(cmd).map(|_| 0),
         Cmd::Model { cmd } => strip::cli::run(cmd).map(|_| 0),
         Cmd::Replay(a) => recording_tools::cli::replay(a).map(|_| 0),
