@@ -57,6 +57,15 @@ pub struct PlantLoop<'a> {
     pub probe: Option<&'a crate::probe::Latest>,
 }
 
+/// How long [`PlantLoop::wait_for_answers`] waits: see there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Wait {
+    /// Until the torque budget's end, whatever the controller's state.
+    Budget,
+    /// Until the lockstep watchdog, or until the active controller is known gone.
+    Watchdog,
+}
+
 /// Longest single sleep while waiting for a torque (see `wait_for_answers`).
 const WAIT_SLICE: Duration = Duration::from_millis(1);
 
@@ -223,7 +232,15 @@ impl PlantLoop<'_> {
 
     /// Collect the answers to `tick` into `answers` until the arbiter calls the tick settled (the
     /// active controller answered, see [`Arbiter::settled`]) or `deadline` passes.
-    pub(crate) fn wait_for_answers(&self, tick: u64, deadline: Instant, answers: &mut Answers) {
+    ///
+    /// `Wait::Budget` (real time, and a lockstep plant pacing in real time) waits for the answer
+    /// until `deadline` whatever the controller's state: also in a safe stop, before the first
+    /// controller and while the active controller is known gone, since the tick is settled by
+    /// any candidate's answer then and a new controller answering within the budget must be
+    /// seen on time to take over. Only a stop signal ends it early. `Wait::Watchdog` (lockstep)
+    /// also ends early when the active controller is known gone or its process ended: that
+    /// wait may last the whole watchdog.
+    pub(crate) fn wait_for_answers(&self, tick: u64, deadline: Instant, answers: &mut Answers, wait: Wait) {
         let settled = |answers: &Answers| self.arbiter.settled(answers, self.active_gone());
         // Optional busy-wait first: a halted vCPU takes tens of µs to wake on the controller's
         // notification; polling the subscriber (shared memory, no syscall) sees the torque at once.
@@ -251,7 +268,10 @@ impl PlantLoop<'_> {
             if settled(answers) {
                 return;
             }
-            if rt::stop_requested() || rt::controller_end_pending() || self.active_gone() {
+            if rt::stop_requested() {
+                return;
+            }
+            if wait == Wait::Watchdog && (rt::controller_end_pending() || self.active_gone()) {
                 return;
             }
             let now = Instant::now();
@@ -429,7 +449,7 @@ impl PlantLoop<'_> {
             let pb = self.publish(&mut run, tick, deadline_ns, skipped);
             // Wait for the torque of this tick (the active controller's; see the arbiter).
             let budget_end_ns = pb.budget_end_ns(&p);
-            self.wait_for_answers(tick, run.at(budget_end_ns), &mut run.answers);
+            self.wait_for_answers(tick, run.at(budget_end_ns), &mut run.answers, Wait::Budget);
             let Some(applied) = self.apply(&mut run, tick, &pb) else { break };
             self.record(&mut run, &pb, &applied, budget_end_ns, p.budget_ns);
             tick += 1;

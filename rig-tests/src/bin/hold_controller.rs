@@ -1,4 +1,5 @@
-//! `hold-controller --rig NAME --scenario FILE [--contract-version N] [--offset-nm X]`
+//! `hold-controller --rig NAME --scenario FILE [--contract-version N] [--offset-nm X]
+//! [--answer-after-us MIN:MAX [--seed N]]`
 //!
 //! A second, deliberately simple controller binary: joint-space computed torque
 //! `τ = M(q)(Kp e − Kd q̇) + C(q, q̇) q̇ + g(q)` (via RNEA) holding the joint position of the first
@@ -29,6 +30,49 @@ struct Args {
     /// From this tick on, send NaN on joint 1 (testing the plant's refusal).
     #[arg(long)]
     nan_from_tick: Option<u64>,
+    /// Answer each state only MIN..MAX µs (uniform, seeded by `--seed`) after it was received, as a
+    /// slow controller (e.g. one in Python) would: testing that the plant waits its budget.
+    #[arg(long, value_parser = parse_range_us)]
+    answer_after_us: Option<(u64, u64)>,
+    /// Seed of the `--answer-after-us` delays.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+/// `MIN:MAX` in µs, MIN <= MAX.
+fn parse_range_us(s: &str) -> Result<(u64, u64), String> {
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("{s:?} is not MIN:MAX (µs)"))?;
+    let lo: u64 = a.trim().parse().map_err(|e| format!("{a:?}: {e}"))?;
+    let hi: u64 = b.trim().parse().map_err(|e| format!("{b:?}: {e}"))?;
+    if lo > hi {
+        return Err(format!("MIN {lo} is above MAX {hi}"));
+    }
+    Ok((lo, hi))
+}
+
+/// A uniform draw in `lo..=hi` from a xorshift64* state (never zero).
+fn draw(state: &mut u64, (lo, hi): (u64, u64)) -> u64 {
+    *state ^= *state >> 12;
+    *state ^= *state << 25;
+    *state ^= *state >> 27;
+    let x = state.wrapping_mul(0x2545_F491_4F6C_DD1D);
+    lo + x % (hi - lo + 1)
+}
+
+/// Sleep until `t` (CLOCK_MONOTONIC, which `Instant` is on Linux) with an absolute
+/// `clock_nanosleep`; the timer slack is lowered at start so a 200 µs delay is not 250.
+fn sleep_until(t: Instant) {
+    let now = Instant::now();
+    if t <= now {
+        return;
+    }
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: a valid out pointer.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    let target = (ts.tv_sec as u128) * 1_000_000_000 + ts.tv_nsec as u128 + (t - now).as_nanos();
+    let ts = libc::timespec { tv_sec: (target / 1_000_000_000) as libc::time_t, tv_nsec: (target % 1_000_000_000) as libc::c_long };
+    // SAFETY: a valid timespec; a null remainder is allowed with TIMER_ABSTIME.
+    while unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) } == libc::EINTR {}
 }
 
 /// Closed-loop natural frequency (rad/s) and damping ratio of every joint: ω T = 0.06 at 1 kHz.
@@ -57,6 +101,12 @@ fn run(a: &Args) -> anyhow::Result<()> {
     let id = ((std::process::id() as u64) << 32) | nanos as u64;
     let mut hold: Option<Vec6> = None;
     let mut last_state = Instant::now();
+    let mut rng = a.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    if a.answer_after_us.is_some() {
+        // SAFETY: prctl with an integer argument changes only this thread's timer slack.
+        unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) };
+    }
+    let mut answered = false;
     loop {
         // Wake on the plant's notification; a timeout only serves the dead-plant check.
         let _: Wake = ports.wait_state(Instant::now() + Duration::from_millis(20));
@@ -95,6 +145,14 @@ fn run(a: &Args) -> anyhow::Result<()> {
             compute_time_ns: t0.elapsed().as_nanos() as u64,
             ..ControllerDiagnostics::zeroed(a.contract_version)
         };
+        if let Some(range) = a.answer_after_us {
+            sleep_until(t0 + Duration::from_micros(draw(&mut rng, range)));
+        }
         ports.publish(&t, Some(&d))?;
+        if !answered {
+            // Once, for the tests: which tick this controller answered first.
+            answered = true;
+            eprintln!("hold-controller: first answer: tick {}", st.tick);
+        }
     }
 }
