@@ -36,7 +36,7 @@ pub struct DaemonConfig {
     /// SCHED_FIFO priority to request.
     pub rt_priority: i32,
     /// Real time only: busy-poll for the next state from this long before it is due until this
-    /// long after (0 = always sleep in `ppoll`). See [`wait_for_state`].
+    /// long after (0 = always sleep in `ppoll`). See [`ControllerPorts::wait_state_spinning`].
     pub state_spin: Duration,
 }
 
@@ -154,7 +154,7 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
             Some(t) => t + silence,
             None => started + cfg.startup_timeout,
         };
-        let wake = wait_for_state(&ports, next_due.map(|due| (due, cfg.state_spin)), deadline);
+        let wake = ports.wait_state_spinning(next_due.map(|due| (due, cfg.state_spin)), deadline);
         let woke = Instant::now();
         let woke_mono_ns = messages::monotonic_ns();
         let received = if wake == Wake::Timeout {
@@ -302,30 +302,6 @@ const WRENCH_WAIT: Duration = Duration::from_micros(50);
 /// The scenario's `loop.controller_spin_us`, s.
 fn scenario_spin_s(s: &Scenario) -> f64 {
     s.loop_.controller_spin_us * 1e-6
-}
-
-/// Wait for the next state until `deadline`. With `spin = Some((due, w))` (real time), sleep in
-/// `ppoll` until `due − w`, then poll the subscriber's shared memory until `due + w`, then sleep
-/// again. A vCPU that halted in `ppoll` needs tens of µs to wake on the plant's notification (the
-/// round trip pays it twice); a thread already awake at the due time sees the state within a µs,
-/// for a bounded `2 w` of CPU per tick (the other process keeps the rest of both cores).
-fn wait_for_state(ports: &ControllerPorts, spin: Option<(Instant, Duration)>, deadline: Instant) -> Wake {
-    if let Some((due, w)) = spin {
-        let from = due.checked_sub(w).unwrap_or(due).min(deadline);
-        if ports.wait_state(from) == Wake::Notified || ports.state_pending() {
-            return Wake::Notified;
-        }
-        let until = (due + w).min(deadline);
-        while Instant::now() < until {
-            if ports.state_pending() {
-                // Consume the notification that comes with it, if it is already there.
-                let _ = ports.wait_state(Instant::now());
-                return Wake::Notified;
-            }
-            std::hint::spin_loop();
-        }
-    }
-    ports.wait_state(deadline)
 }
 
 /// Version check and shutdown detection of one state: Ok(true) = the plant shuts down.

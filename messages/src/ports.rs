@@ -417,6 +417,31 @@ impl ControllerPorts {
         }
     }
 
+    /// Wait for the next state until `deadline`. With `spin = Some((due, w))` (real time), sleep in
+    /// `ppoll` until `due − w`, then poll the subscriber's shared memory until `due + w`, then sleep
+    /// again. A vCPU that halted in `ppoll` needs tens of µs to wake on the plant's notification (the
+    /// round trip pays it twice); a thread already awake at the due time sees the state within a µs,
+    /// for a bounded `2 w` of CPU per tick (the other process keeps the rest of both cores). The
+    /// controller daemon and the C client library (`rig-client`) wait with this one function.
+    pub fn wait_state_spinning(&self, spin: Option<(Instant, Duration)>, deadline: Instant) -> Wake {
+        if let Some((due, w)) = spin {
+            let from = due.checked_sub(w).unwrap_or(due).min(deadline);
+            if self.wait_state(from) == Wake::Notified || self.state_pending() {
+                return Wake::Notified;
+            }
+            let until = (due + w).min(deadline);
+            while Instant::now() < until {
+                if self.state_pending() {
+                    // Consume the notification that comes with it, if it is already there.
+                    let _ = self.wait_state(Instant::now());
+                    return Wake::Notified;
+                }
+                std::hint::spin_loop();
+            }
+        }
+        self.wait_state(deadline)
+    }
+
     /// True when a joint state waits in the subscriber. Reads shared memory only (no syscall):
     /// what a controller busy-polls in the short window around a state's due time, where waking
     /// from `ppoll` would cost a halted vCPU's wake-up (tens of µs on a VM).
