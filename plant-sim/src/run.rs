@@ -88,6 +88,8 @@ impl RunSummary {
             "first_refusal_tick": s.first_refusal_tick,
             "controller_ended": s.controller_ended,
             "overruns": s.overruns,
+            "lost_wakeups": s.lost_wakeups,
+            "lost_wakeups_in_a_row": s.lost_wakeups_in_a_row,
             "rt_p50_us": us(s.round_trip.quantile_ns(0.5)),
             "rt_p99_us": us(s.round_trip.quantile_ns(0.99)),
             "rt_max_us": us(s.round_trip.max_ns()),
