@@ -181,6 +181,42 @@ fn poll_once(fd: i32, d: Duration) -> bool {
     unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) > 0 }
 }
 
+/// The one way this crate waits on an iceoryx2 event: drain `listener` until a drain finds no
+/// activation, then look for the data (`pending`), and only then sleep on the listener's `fd`
+/// until it is readable or `deadline`.
+///
+/// Why (issue 22): in iceoryx2 0.10 a listener's notifiers share one notification state
+/// (idle → pending → notified). `notify` activates its event id, moves idle → pending, sends a
+/// datagram and only then marks "notified"; while the state is "notified" it sends no datagram.
+/// A drain (`try_wait`) that finds "notified" moves it to idle and then empties the socket: the
+/// datagram of a `notify` that runs in between is eaten, and that notifier's late "notified"
+/// mark lands on an empty socket. From then on `notify` returns Ok and sends nothing, and a
+/// waiter sleeping on the fd (ppoll here, epoll in iceoryx2's WaitSet) is not woken until
+/// something drains the listener. The old waits drained only after a wake-up, so once in that
+/// state every later tick waited for its 1 ms slice. Draining before the sleep clears a mark
+/// that has landed; draining once more whenever a drain found activations also disarms one that
+/// has not landed yet (that drain finds the state "pending" and sets it idle, so the late mark's
+/// compare-exchange fails): the eaten datagram's activation is always counted by the drain that
+/// ate it. Looking for the data after the drains keeps an answer whose notification they
+/// consumed from being slept through. The minimal program: `rig-tests/src/bin/iox2_lost_wakeup.rs`.
+fn drain_then_wait(listener: &Listener, fd: i32, deadline: Instant, pending: impl Fn() -> bool) -> Wake {
+    // Bounded: a peer notifying without pause must not keep us here (the caller's slice is the
+    // backstop then).
+    for _ in 0..MAX_DRAINS {
+        if listener.try_wait(|_| {}).unwrap_or(0) == 0 {
+            break;
+        }
+    }
+    if pending() || wait_readable(fd, deadline) {
+        Wake::Notified
+    } else {
+        Wake::Timeout
+    }
+}
+
+/// Most drains of one [`drain_then_wait`] (each after one that found activations).
+const MAX_DRAINS: usize = 4;
+
 fn listener_fd(l: &Listener) -> i32 {
     use iceoryx2_bb_posix::file_descriptor::FileDescriptorBased;
     // SAFETY: the fd lives as long as the listener, which outlives every use through `self`.
@@ -318,14 +354,17 @@ impl PlantPorts {
         Ok(())
     }
 
-    /// Wait for the controller's notification until the absolute `deadline`; consumes it.
+    /// Wait for a torque until the absolute `deadline`: drain the listener first, return at once
+    /// if a torque waits in the subscriber, else sleep on the listener's fd. See
+    /// [`drain_then_wait`] for why the drain comes before the sleep. The notification that ends
+    /// the sleep is left for the next call to drain.
     pub fn wait_torque(&self, deadline: Instant) -> Wake {
-        if wait_readable(self.torque_fd, deadline) {
-            let _ = self.torque_ready.try_wait(|_| {});
-            Wake::Notified
-        } else {
-            Wake::Timeout
-        }
+        drain_then_wait(&self.torque_ready, self.torque_fd, deadline, || self.torque_sub.has_samples().unwrap_or(false))
+    }
+
+    /// Drain the torque listener: the number of notifications (iceoryx2 activations) it held.
+    pub fn drain_torque_events(&self) -> u64 {
+        self.torque_ready.try_wait(|_| {}).unwrap_or(0)
     }
 
     /// Newest torque whose `tick` equals `tick` (older answers are discarded).
@@ -407,14 +446,10 @@ impl ControllerPorts {
         &self.rig
     }
 
-    /// Wait for the plant's notification until the absolute `deadline`; consumes it.
+    /// Wait for a state until the absolute `deadline`: drain the listener first, return at once
+    /// if a state waits in the subscriber, else sleep on the listener's fd ([`drain_then_wait`]).
     pub fn wait_state(&self, deadline: Instant) -> Wake {
-        if wait_readable(self.state_fd, deadline) {
-            let _ = self.state_ready.try_wait(|_| {});
-            Wake::Notified
-        } else {
-            Wake::Timeout
-        }
+        drain_then_wait(&self.state_ready, self.state_fd, deadline, || self.state_pending())
     }
 
     /// Wait for the next state until `deadline`. With `spin = Some((due, w))` (real time), sleep in

@@ -397,6 +397,21 @@ impl WrenchOnTool {
     }
 }
 
+/// [`StripTables`] as plain vectors in a fixed order (`table_cache`); counts as f64 (exact).
+pub(crate) struct TableParts(Vec<Vec<f64>>);
+
+impl TableParts {
+    pub(crate) fn len_f64(&self) -> usize {
+        self.0.iter().map(Vec::len).sum()
+    }
+    pub(crate) fn vecs(&self) -> &[Vec<f64>] {
+        &self.0
+    }
+    pub(crate) fn from_vecs(v: Vec<Vec<f64>>) -> Option<TableParts> {
+        (v.len() == 21).then_some(TableParts(v))
+    }
+}
+
 /// What the contact needs of a strip model and a substep, computed once: the wheel table (most of
 /// a run's start-up) and the modal rows of the recorded outputs. It holds the bump of the model
 /// it was built from; a contact scales that bump to its own height (the bump's offsets are linear
@@ -504,6 +519,92 @@ impl StripTables {
             tcl_bulge_m: tcl.iter().map(|&j| model.bulge_top_uy_m[j]).collect(),
             top_xyz_m: model.top_xyz_m.clone(),
         }
+    }
+
+    /// The tables as plain vectors in a fixed order, for the on-disk cache (`table_cache`).
+    pub(crate) fn parts(&self) -> TableParts {
+        let t = &self.table;
+        let scalars = vec![t.z0_m, t.n as f64, self.h_s, self.modes as f64, self.bulge_sum_n];
+        TableParts(vec![
+            scalars,
+            t.gb.clone(),
+            t.c.clone(),
+            t.cgb_point.clone(),
+            t.cgb_cross.clone(),
+            t.d_ww.clone(),
+            t.d_sum.clone(),
+            t.bulge_w.clone(),
+            t.d_cl.clone(),
+            t.d_tcl.clone(),
+            self.z_re.clone(),
+            self.z_im.clone(),
+            self.csum.clone(),
+            self.cl_rows.iter().map(|&r| r as f64).collect(),
+            self.cl_z_m.clone(),
+            self.cl_area_m2.clone(),
+            self.cl_bulge_n.clone(),
+            self.ccl.clone(),
+            self.ctcl.clone(),
+            self.tcl_bulge_m.clone(),
+            self.top_xyz_m.iter().flatten().copied().collect(),
+        ])
+    }
+
+    /// Tables from [`StripTables::parts`] of a model with parameters `params` and substep `h_s`;
+    /// None when the parts do not fit together.
+    pub(crate) fn from_parts(params: StripParams, h_s: f64, parts: TableParts) -> Option<StripTables> {
+        let mut it = parts.0.into_iter();
+        let mut next = || it.next();
+        let sc = next()?;
+        let &[z0_m, n, h, modes, bulge_sum_n] = sc.as_slice() else { return None };
+        let (n, modes) = (n as usize, modes as usize);
+        if h.to_bits() != h_s.to_bits() {
+            return None;
+        }
+        let table = WheelTable {
+            z0_m,
+            n,
+            gb: next()?,
+            c: next()?,
+            cgb_point: next()?,
+            cgb_cross: next()?,
+            d_ww: next()?,
+            d_sum: next()?,
+            bulge_w: next()?,
+            d_cl: next()?,
+            d_tcl: next()?,
+        };
+        let t = StripTables {
+            params,
+            table,
+            h_s,
+            modes,
+            z_re: next()?,
+            z_im: next()?,
+            csum: next()?,
+            cl_rows: next()?.iter().map(|&r| r as usize).collect(),
+            cl_z_m: next()?,
+            cl_area_m2: next()?,
+            cl_bulge_n: next()?,
+            bulge_sum_n,
+            ccl: next()?,
+            ctcl: next()?,
+            tcl_bulge_m: next()?,
+            top_xyz_m: next()?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        };
+        let row = 2 * modes;
+        let ok = t.table.gb.len() == n * row
+            && t.table.c.len() == n * row
+            && [&t.table.cgb_point, &t.table.cgb_cross, &t.table.d_ww, &t.table.d_sum, &t.table.bulge_w].iter().all(|v| v.len() == n)
+            && t.z_re.len() == modes
+            && t.z_im.len() == modes
+            && t.csum.len() == row
+            && t.ccl.len() == t.cl_rows.len() * row
+            && t.table.d_cl.len() == n * t.cl_rows.len()
+            && [&t.cl_z_m, &t.cl_area_m2, &t.cl_bulge_n].iter().all(|v| v.len() == t.cl_rows.len())
+            && t.ctcl.len() == t.tcl_bulge_m.len() * row
+            && t.table.d_tcl.len() == n * t.tcl_bulge_m.len();
+        ok.then_some(t)
     }
 
     /// Parameters of the model the tables were built from (its bump is the one they hold).
@@ -903,6 +1004,26 @@ mod tests {
     /// The blocked, multi-threaded table build gives the plain formulas' table bit for bit (the
     /// physics digests of the tick-identity test rest on it), on a grid whose length is not a
     /// multiple of the block.
+    #[test]
+    fn cached_tables_load_bit_for_bit_and_a_bad_file_is_rebuilt() {
+        let model = coarse();
+        let h = 1e-4;
+        let built = StripTables::new(&model, h);
+        let dir = std::env::temp_dir().join(format!("table-cache-test-{}", std::process::id()));
+        let path = crate::table_cache::path(&dir, &model.params, h);
+        crate::table_cache::save(&built, &path).unwrap();
+        let loaded = crate::table_cache::load(&path, &model.params, h).expect("cached tables load");
+        let bits = |t: &StripTables| t.parts().vecs().iter().map(|v| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>()).collect::<Vec<_>>();
+        assert_eq!(bits(&loaded), bits(&built));
+        assert_eq!(loaded.params(), built.params());
+        // Another substep, a truncated file: no tables (the caller builds them).
+        assert!(crate::table_cache::load(&path, &model.params, 2e-4).is_none());
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 5]).unwrap();
+        assert!(crate::table_cache::load(&path, &model.params, h).is_none());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn fast_table_build_is_the_plain_one_bit_for_bit() {
         let model = coarse();

@@ -18,6 +18,7 @@ pub mod rt;
 pub mod run;
 mod stack_text;
 pub mod stats;
+pub mod table_cache;
 pub mod tick;
 
 pub use tick::PlantTick;

@@ -42,13 +42,15 @@ impl PlantLoop<'_> {
             // Wait for the torque of this tick (the active controller's; see the arbiter).
             let (budget_end_ns, budget_ns) = if paced {
                 let end = pb.budget_end_ns(&p);
-                self.wait_for_answers(tick, run.at(end), &mut run.answers, Wait::Budget);
+                let lost = self.wait_for_answers(tick, run.at(end), &mut run.answers, Wait::Budget);
+                run.stats.note_lost_wakeups(lost);
                 (end, p.budget_ns)
             } else if self.plant.gate().status() == PlantStatus::WaitingForController {
                 // Start-up: hold tick 0 until a controller answers it.
                 let end = pb.budget_end_ns(&p);
                 while !rt::stop_requested() {
-                    self.wait_for_answers(tick, Instant::now() + LOCKSTEP_REPUBLISH, &mut run.answers, Wait::Watchdog);
+                    let lost = self.wait_for_answers(tick, Instant::now() + LOCKSTEP_REPUBLISH, &mut run.answers, Wait::Watchdog);
+                    run.stats.note_lost_wakeups(lost);
                     if !run.answers.is_empty() {
                         break;
                     }
@@ -58,7 +60,8 @@ impl PlantLoop<'_> {
                 (end, p.watchdog_ns)
             } else {
                 let end = pb.publish_ns + p.watchdog_ns;
-                self.wait_for_answers(tick, run.at(end), &mut run.answers, Wait::Watchdog);
+                let lost = self.wait_for_answers(tick, run.at(end), &mut run.answers, Wait::Watchdog);
+                run.stats.note_lost_wakeups(lost);
                 (end, p.watchdog_ns)
             };
             let Some(applied) = self.apply(&mut run, tick, &pb) else { break };

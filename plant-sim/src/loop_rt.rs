@@ -18,7 +18,7 @@ use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
 use messages::liveness::PeerWatch;
-use messages::ports::{Answers, PlantPorts};
+use messages::ports::{Answers, PlantPorts, Wake};
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench};
 use scenarios::Mode;
 
@@ -240,7 +240,11 @@ impl PlantLoop<'_> {
     /// seen on time to take over. Only a stop signal ends it early. `Wait::Watchdog` (lockstep)
     /// also ends early when the active controller is known gone or its process ended: that
     /// wait may last the whole watchdog.
-    pub(crate) fn wait_for_answers(&self, tick: u64, deadline: Instant, answers: &mut Answers, wait: Wait) {
+    ///
+    /// Returns the wake-ups lost on the way: wait slices that ran out although a notification
+    /// had come and the answer then settled the tick (see `messages::ports` on iceoryx2's
+    /// notification state; each costs up to one [`WAIT_SLICE`]).
+    pub(crate) fn wait_for_answers(&self, tick: u64, deadline: Instant, answers: &mut Answers, wait: Wait) -> u64 {
         let settled = |answers: &Answers| self.arbiter.settled(answers, self.active_gone());
         // Optional busy-wait first: a halted vCPU takes tens of µs to wake on the controller's
         // notification; polling the subscriber (shared memory, no syscall) sees the torque at once.
@@ -249,9 +253,8 @@ impl PlantLoop<'_> {
             loop {
                 self.ports.receive_answers(tick, answers);
                 if settled(answers) {
-                    // Consume the notification that came with it (non-blocking).
-                    let _ = self.ports.wait_torque(Instant::now());
-                    return;
+                    // Its notification stays in the listener: the next wait drains it first.
+                    return 0;
                 }
                 if Instant::now() >= spin_end {
                     break;
@@ -263,22 +266,29 @@ impl PlantLoop<'_> {
         // launcher's report that the controller ended, or the watcher finding the active
         // controller gone end the wait early (a lockstep wait may last the 2 s watchdog), and an
         // answer whose notification was lost is still found within a slice.
+        let mut lost = 0;
+        let mut slice_ran_out = false;
         loop {
+            // After a slice ran out: notifications that are there woke nobody.
+            let unwoken = if slice_ran_out { self.ports.drain_torque_events() } else { 0 };
             self.ports.receive_answers(tick, answers);
             if settled(answers) {
-                return;
+                return lost + u64::from(unwoken > 0);
             }
             if rt::stop_requested() {
-                return;
+                return lost;
             }
             if wait == Wait::Watchdog && (rt::controller_end_pending() || self.active_gone()) {
-                return;
+                return lost;
             }
             let now = Instant::now();
             if now >= deadline {
-                return;
+                return lost;
             }
-            let _ = self.ports.wait_torque(deadline.min(now + WAIT_SLICE));
+            // Not settled: a stranger's (or a late) answer; its notification may still be lost.
+            lost += u64::from(unwoken > 0);
+            let slice_end = deadline.min(now + WAIT_SLICE);
+            slice_ran_out = self.ports.wait_torque(slice_end) == Wake::Timeout && slice_end < deadline;
         }
     }
 
@@ -449,7 +459,8 @@ impl PlantLoop<'_> {
             let pb = self.publish(&mut run, tick, deadline_ns, skipped);
             // Wait for the torque of this tick (the active controller's; see the arbiter).
             let budget_end_ns = pb.budget_end_ns(&p);
-            self.wait_for_answers(tick, run.at(budget_end_ns), &mut run.answers, Wait::Budget);
+            let lost = self.wait_for_answers(tick, run.at(budget_end_ns), &mut run.answers, Wait::Budget);
+            run.stats.note_lost_wakeups(lost);
             let Some(applied) = self.apply(&mut run, tick, &pb) else { break };
             self.record(&mut run, &pb, &applied, budget_end_ns, p.budget_ns);
             tick += 1;

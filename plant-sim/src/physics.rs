@@ -70,9 +70,32 @@ impl Physics {
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
         let tables = if s.strip.enabled {
             let params = crate::contact::strip_params(s).with_reference_bulge();
-            let model = strip::StripModel::load_or_build_in(cache_dir, &params)
-                .with_context(|| format!("strip model (cache {})", cache_dir.display()))?;
-            Some(Arc::new(StripTables::new(&model, substep_s(s))))
+            let t0 = std::time::Instant::now();
+            let h_s = substep_s(s);
+            let path = crate::table_cache::path(cache_dir, &params, h_s);
+            let tables = match crate::table_cache::load(&path, &params, h_s) {
+                Some(t) => {
+                    tracing::info!(load_ms = t0.elapsed().as_secs_f64() * 1e3, "contact tables loaded from {}", path.display());
+                    t
+                }
+                None => {
+                    let model = strip::StripModel::load_or_build_in(cache_dir, &params)
+                        .with_context(|| format!("strip model (cache {})", cache_dir.display()))?;
+                    let t_model = t0.elapsed();
+                    let tables = StripTables::new(&model, h_s);
+                    if let Err(e) = crate::table_cache::save(&tables, &path) {
+                        tracing::warn!("could not cache the contact tables in {}: {e}", path.display());
+                    }
+                    // Two parts of the plant's start-up (README, "Lockstep start-up").
+                    tracing::info!(
+                        model_ms = t_model.as_secs_f64() * 1e3,
+                        tables_ms = (t0.elapsed() - t_model).as_secs_f64() * 1e3,
+                        "strip model loaded, contact tables built and cached"
+                    );
+                    tables
+                }
+            };
+            Some(Arc::new(tables))
         } else {
             None
         };

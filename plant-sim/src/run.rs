@@ -88,6 +88,8 @@ impl RunSummary {
             "first_refusal_tick": s.first_refusal_tick,
             "controller_ended": s.controller_ended,
             "overruns": s.overruns,
+            "lost_wakeups": s.lost_wakeups,
+            "lost_wakeups_in_a_row": s.lost_wakeups_in_a_row,
             "rt_p50_us": us(s.round_trip.quantile_ns(0.5)),
             "rt_p99_us": us(s.round_trip.quantile_ns(0.99)),
             "rt_max_us": us(s.round_trip.max_ns()),
@@ -191,6 +193,7 @@ pub fn open_recorder_with(
 
 /// Run the plant until the duration is reached or SIGINT/SIGTERM arrives.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
+    let t_run = std::time::Instant::now();
     let launcher = crate::launcher::Launcher::now();
     messages::services::validate_rig_name(&opts.rig).map_err(anyhow::Error::msg)?;
     let scenario = Scenario::load(&opts.scenario_path)?;
@@ -221,7 +224,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     rt::install_stop_signals();
     rt::install_controller_end_signal();
 
+    let t_setup = std::time::Instant::now();
     let mut physics = Physics::new(&scenario, &opts.cache_dir)?;
+    let t_physics = t_setup.elapsed();
     let ports = messages::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
     // Liveness of the controllers' nodes, on its own thread (started before the loop's real-time
     // set-up, so it keeps the normal scheduling policy).
@@ -243,6 +248,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         opts.scenario_path.display()
     );
     let recording = scenario.recording.enabled.then(|| opts.out.clone().unwrap_or_else(|| default_recording_path(&opts.rig)));
+    let t_ports = t_setup.elapsed();
     let mut recorder = match &recording {
         Some(path) => {
             let about = RecordingAbout { rig: &opts.rig, mode, scenario_path: &opts.scenario_path, scenario_text, transport: None };
@@ -281,11 +287,18 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
             if rt_setup.mlockall { "on" } else { "refused" }
         );
     }
+    // The start-up's parts (README, "Lockstep start-up"): scenario and host checks, strip model
+    // and contact tables, ports and liveness watch, recorder.
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     tracing::info!(
         rig = %opts.rig,
         mode = ?mode,
         ticks = params.n_ticks,
         recording = ?recording,
+        host_ms = ms(t_setup - t_run),
+        physics_ms = ms(t_physics),
+        ports_ms = ms(t_ports - t_physics),
+        recorder_ms = ms(t_setup.elapsed() - t_ports),
         "plant running"
     );
     if let Some(r) = recorder.as_mut() {
@@ -344,6 +357,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone()) {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
     }
+    let t_end = std::time::Instant::now();
     let drops = recorder.as_ref().map_or(0, |r| r.dropped());
     let live_addr = recorder.as_ref().and_then(|r| r.live_addr());
     let (recording_stopped_early, live) = match recorder {
@@ -353,7 +367,13 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         }
         None => (None, None),
     };
-    tracing::info!(ticks = stats.ticks, misses = stats.misses, safe_stops = stats.safe_stops, "plant stopped");
+    tracing::info!(
+        ticks = stats.ticks,
+        misses = stats.misses,
+        safe_stops = stats.safe_stops,
+        finish_ms = ms(t_end.elapsed()),
+        "plant stopped"
+    );
     Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live, probe, egm })
 }
 

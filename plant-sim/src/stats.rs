@@ -36,6 +36,14 @@ pub struct LoopStats {
     pub first_refusal_tick: Option<u64>,
     /// The launcher reported the controller process ended, or its node was seen dead.
     pub controller_ended: bool,
+    /// Torque wait slices that ran out although a notification had come, each costing up to
+    /// 1 ms: a wake-up iceoryx2 lost (`messages::ports`), or a controller preempted inside its
+    /// `notify` (its event activated, its datagram not yet sent) for the rest of the slice.
+    pub lost_wakeups: u64,
+    /// The most ticks in a row that lost a wake-up. iceoryx2's lost wake-up, left alone, lasts
+    /// until the listener is drained: every later tick (the waits before issue 22).
+    pub lost_wakeups_in_a_row: u64,
+    lost_streak: u64,
 }
 
 impl LoopStats {
@@ -77,6 +85,16 @@ impl LoopStats {
             first_reflex_tick: None,
             first_refusal_tick: None,
             controller_ended: false,
+            lost_wakeups: 0,
+            lost_wakeups_in_a_row: 0,
+            lost_streak: 0,
         }
+    }
+
+    /// Count one tick's lost wake-ups (`PlantLoop::wait_for_answers`).
+    pub(crate) fn note_lost_wakeups(&mut self, lost: u64) {
+        self.lost_wakeups += lost;
+        self.lost_streak = if lost > 0 { self.lost_streak + 1 } else { 0 };
+        self.lost_wakeups_in_a_row = self.lost_wakeups_in_a_row.max(self.lost_streak);
     }
 }

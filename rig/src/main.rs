@@ -3,7 +3,7 @@
 //! - `rig run [SCENARIO.toml] [--mode realtime|lockstep] [--controller PATH] [--duration S] [--out DIR]
 //!   [--live [ADDR]] [--live-rate HZ]` starts `plant-sim` and a controller on a fresh rig name,
 //!   supervises them and prints a summary; `--live` serves the run to Foxglove as it goes.
-//! - `rig timing [--seconds N] [--live [ADDR]]`: a real-time timing run with latency and jitter distributions.
+//! - `rig timing [--seconds N] [--no-host-probe] [--live [ADDR]]`: a real-time timing run with latency and jitter distributions.
 //! - `rig sweep [SCENARIO.toml] --set section.field=v1,v2,... [--grid]`: a parameter study, one
 //!   in-process lockstep run per case, several at once across the cores, tabulated from the
 //!   recordings.
@@ -153,8 +153,13 @@ struct TimingArgs {
     #[arg(long)]
     no_idle_poll: bool,
     /// The host-floor probe's period, µs (default: plant-sim's, 250; at most the loop's period)
-    #[arg(long)]
+    #[arg(long, conflicts_with = "no_host_probe")]
     probe_period_us: Option<u64>,
+    /// Run without the host-floor probe (its threads wake every 250 µs on every CPU): for an A/B
+    /// comparison of the loop alone (`rig-tests/ab-timing.sh`). The miss attribution then has
+    /// no host stalls to blame.
+    #[arg(long)]
+    no_host_probe: bool,
     #[command(flatten)]
     live: LiveArgs,
 }
@@ -600,7 +605,7 @@ fn main() {
             };
             let live = a.live.config();
             let mut l = prepare(rig, scenario, Some("realtime".into()), ("--seconds", Some(a.seconds)), Some(dir), a.controller, live)?;
-            l.host_probe = true;
+            l.host_probe = !a.no_host_probe;
             l.host_probe_period_us = a.probe_period_us;
             launch_and_report(&l, true, a.json.as_deref())
         })(),
