@@ -255,11 +255,11 @@ impl ControlLaw {
     }
 }
 
-/// The controller's robot model: the scenario's arm and tool ([`scenarios::geometry::tool`]) with armature
+/// The controller's robot model: the scenario's arm and the tool it believes ([`scenarios::geometry::controller_tool`]) with armature
 /// and viscous friction, deliberately WITHOUT `robot.plant_inertia_scale` (that is the plant's
-/// mismatch).
+/// mismatch, like `[mismatch] link_inertia_scale` and `[drives]`).
 pub fn controller_robot(s: &scenarios::Scenario) -> Robot {
-    Robot::irb2400_with_tool(scenarios::geometry::tool(s))
+    Robot::irb2400_with_tool(scenarios::geometry::controller_tool(s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms))
 }

@@ -39,10 +39,16 @@ pub fn substep_s(s: &Scenario) -> f64 {
 /// The plant robot of a scenario: arm + tool ([`geometry::tool`], as the controller's), armature and viscous friction from `[robot]`, every
 /// mass and inertia scaled by `robot.plant_inertia_scale` (plant/controller mismatch studies).
 pub fn plant_robot(s: &Scenario) -> Robot {
-    Robot::irb2400_with_tool(geometry::tool(s))
+    let robot = Robot::irb2400_with_tool(geometry::tool(s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms))
-        .scaled_inertia(s.robot.plant_inertia_scale)
+        .scaled_inertia(s.robot.plant_inertia_scale);
+    // `[mismatch]`: the plant's links against the controller's model, per link.
+    if s.mismatch.link_inertia_scale == [1.0; 6] {
+        robot
+    } else {
+        robot.scaled_links(&s.mismatch.link_inertia_scale)
+    }
 }
 
 /// Plant state and integrator.
@@ -62,6 +68,8 @@ pub struct Physics {
     contact: Option<crate::contact::StripContact>,
     /// End stops and drive torque–speed limits, applied inside every integrator stage.
     limits: crate::limits::JointLimits,
+    /// `[drives]`: friction with stiction and torque-constant errors (None: ideal drives).
+    friction: Option<crate::drives::Friction>,
 }
 
 impl Physics {
@@ -104,7 +112,9 @@ impl Physics {
             .ik_tcp(&target, &robot::ik_seed_tool_down())
             .with_context(|| format!("start pose {:?} of the scenario is not reachable", target.translation.vector))?;
         let limits = crate::limits::JointLimits::irb2400(&robot.mass_matrix(&q).diagonal());
+        let friction = s.drives.enabled.then(|| crate::drives::Friction::new(&s.drives, &limits, &q));
         Ok(Physics {
+            friction,
             limits,
             robot,
             q,
@@ -160,7 +170,10 @@ impl Physics {
     /// exactly (the limits add exact zeros). `sc`: the joints' (sin, cos) at `q`.
     #[inline]
     fn qdd(&self, q: &Vec6, sc: &robot::SinCos, qd: &Vec6, tau: &(Vec6, Vec6)) -> Vec6 {
-        let total = self.limits.drive_torque(&tau.0, qd) + tau.1 + self.limits.end_stop_torque(q, qd);
+        let mut total = self.limits.drive_torque(&tau.0, qd) + tau.1 + self.limits.end_stop_torque(q, qd);
+        if let Some(f) = &self.friction {
+            total += f.torque(q, qd);
+        }
         self.robot.forward_dynamics_sc(sc, qd, &total)
     }
 
@@ -184,6 +197,9 @@ impl Physics {
     /// wrench on the tool W = −F_e enters the robot as the generalized force J(q)ᵀ W held over the substep.
     pub fn step_tick(&mut self, tau_cmd: &Vec6) {
         let h = self.dt_sub_s;
+        // The drives apply the command through their torque constants.
+        let applied = self.friction.as_ref().map(|f| f.applied(tau_cmd));
+        let tau_cmd = applied.as_ref().unwrap_or(tau_cmd);
         for _ in 0..self.substeps {
             let (q, qd) = (self.q, self.qd);
             // One (sin, cos) of q for the contact's frames and the first stage's dynamics.
@@ -204,6 +220,9 @@ impl Physics {
                 Integrator::Rk4 => self.rk4(&q, &sc, &qd, tau, h),
             };
             self.limits.limit_driven_speed(tau_cmd, &mut self.qd);
+            if let Some(f) = self.friction.as_mut() {
+                f.slip(&self.q, &self.qd);
+            }
         }
         self.time_s += h * self.substeps as f64;
     }
