@@ -3,7 +3,18 @@
 //!
 //! 1. Tool load compensation (`tool_load_compensation`): subtract the tool's gravity load from
 //!    the nominal mass and centre the controller believes (`scenarios::geometry::controller_tool`),
-//!    rotating with the tool: `F = Rᵀ m g`, `M = (c − p_tcp) × F` in tool axes about the TCP.
+//!    rotating with the tool: `F = Rᵀ m g`, `M = (c − p_tcp) × F` in tool axes about the TCP;
+//!    and its inertial load `−m a_c`, `−I α` from the acceleration the controller commanded on
+//!    the previous tick, passed through the sensor's nominal low-pass and sample delay (`[sensor]`
+//!    lowpass_hz, delay_ticks: the datasheet's values) so that it lines up with the reading.
+//!    Why the inertial part matters: the impedance (6.3) has m_d ≈ 0.2 kg, the tool beyond the
+//!    sensor 1 kg; uncompensated, the tool's own acceleration −m ÿ in the measured force closes a
+//!    loop of gain m/m_d ≈ 5 through a_y = (F_r − F_e)/m_d, which diverges at the Nyquist rate.
+//!    Only the commanded acceleration's part above [`INERTIAL_HIGH_PASS_HZ`] is used: below it,
+//!    when stiction holds the arm against the motion PD, the commanded acceleration is not what
+//!    the tool does (a phantom force m k_p e of about 0.4 N in free air, enough to trip the
+//!    contact detection), and the tool's true low-frequency inertial load is tiny here
+//!    (m ÿ ≈ 0.05 N on the roll's cosine profile).
 //! 2. Tare (`tare_s`), as on a real cell: the robot stands still in free air in its start pose
 //!    (the reference generator's settle phase, before the approach); over the first `tare_s` of
 //!    states the controller averages the compensated reading and from then on subtracts that
@@ -34,7 +45,25 @@ pub struct ForceSensing {
     /// Filter coefficient β (None: no filter) and state.
     beta: Option<f64>,
     filtered: Option<[f64; 6]>,
+    inertia_com: Matrix3<f64>,
+    /// The sensor's nominal low-pass coefficient and delay (1, 0 without a sensor model) and the
+    /// predicted inertial load through them.
+    sensor_alpha: f64,
+    sensor_delay: usize,
+    inertial_filtered: [f64; 6],
+    inertial_ring: [[f64; 6]; DELAY_RING],
+    head: usize,
+    /// High-pass: y_k = γ (y_{k−1} + x_k − x_{k−1}), γ = exp(−2π f T); its last input and output.
+    high_pass: f64,
+    hp_in: [f64; 6],
+    hp_out: [f64; 6],
 }
+
+/// Corner of the first-order high-pass on the predicted inertial load, Hz (module docs).
+pub const INERTIAL_HIGH_PASS_HZ: f64 = 2.0;
+
+/// Longest sensor delay the compensation models, ticks (the scenario allows 100).
+const DELAY_RING: usize = 101;
 
 impl ForceSensing {
     pub fn from_scenario(s: &Scenario) -> ForceSensing {
@@ -52,7 +81,49 @@ impl ForceSensing {
             offset: [0.0; 6],
             beta: (c.force_filter_hz > 0.0).then(|| 1.0 - (-std::f64::consts::TAU * c.force_filter_hz * period).exp()),
             filtered: None,
+            inertia_com: tool.inertia_com,
+            sensor_alpha: if s.sensor.enabled && s.sensor.lowpass_hz > 0.0 {
+                1.0 - (-std::f64::consts::TAU * s.sensor.lowpass_hz * period).exp()
+            } else {
+                1.0
+            },
+            sensor_delay: if s.sensor.enabled { (s.sensor.delay_ticks as usize).min(DELAY_RING - 1) } else { 0 },
+            inertial_filtered: [0.0; 6],
+            inertial_ring: [[0.0; 6]; DELAY_RING],
+            head: 0,
+            high_pass: (-std::f64::consts::TAU * INERTIAL_HIGH_PASS_HZ * period).exp(),
+            hp_in: [0.0; 6],
+            hp_out: [0.0; 6],
         }
+    }
+
+    /// The tool's inertial load on the sensor (tool axes, about the TCP, a wrench on the tool) for
+    /// the TCP acceleration `accel_base` (linear then angular, base axes): `−m a_c` with
+    /// `a_c = a + α × r`, its moment, and `−I α` (the ω terms are negligible at these speeds).
+    pub fn inertial_load(&self, rot_base_tool: &Matrix3<f64>, accel_base: &robot::Vec6) -> [f64; 6] {
+        let r_tool = self.com_flange_m - self.tcp_flange_m;
+        let a = rot_base_tool.transpose() * Vector3::new(accel_base[0], accel_base[1], accel_base[2]);
+        let alpha = rot_base_tool.transpose() * Vector3::new(accel_base[3], accel_base[4], accel_base[5]);
+        let f = -(a + alpha.cross(&r_tool)) * self.mass_kg;
+        let m = r_tool.cross(&f) - self.inertia_com * alpha;
+        [f.x, f.y, f.z, m.x, m.y, m.z]
+    }
+
+    /// The inertial load of the previous tick's commanded acceleration as the sensor reports it
+    /// now (through its nominal filter and delay).
+    fn inertial_as_read(&mut self, rot_base_tool: &Matrix3<f64>, accel_prev_base: &robot::Vec6) -> [f64; 6] {
+        let x = self.inertial_load(rot_base_tool, accel_prev_base);
+        for (y, xi) in self.inertial_filtered.iter_mut().zip(x) {
+            *y += self.sensor_alpha * (xi - *y);
+        }
+        self.head = (self.head + 1) % DELAY_RING;
+        self.inertial_ring[self.head] = self.inertial_filtered;
+        let read = self.inertial_ring[(self.head + DELAY_RING - self.sensor_delay) % DELAY_RING];
+        for ((out, r), prev) in self.hp_out.iter_mut().zip(read).zip(self.hp_in) {
+            *out = self.high_pass * (*out + r - prev);
+        }
+        self.hp_in = read;
+        self.hp_out
     }
 
     /// True when any step is on (otherwise the reading goes to the law untouched).
@@ -77,11 +148,16 @@ impl ForceSensing {
         [f.x, f.y, f.z, m.x, m.y, m.z]
     }
 
-    /// The wrench the law uses this tick, from the reading `w` with the tool at `rot_base_tool`.
-    pub fn process(&mut self, w: &Wrench, rot_base_tool: &Matrix3<f64>) -> Wrench {
+    /// The wrench the law uses this tick, from the reading `w` with the tool at `rot_base_tool`;
+    /// `accel_prev_base`: the TCP acceleration the law commanded on the previous tick.
+    pub fn process(&mut self, w: &Wrench, rot_base_tool: &Matrix3<f64>, accel_prev_base: &robot::Vec6) -> Wrench {
         let mut x = [w.force[0], w.force[1], w.force[2], w.torque[0], w.torque[1], w.torque[2]];
         if self.compensate {
             let mut load = self.tool_load(rot_base_tool);
+            let inertial = self.inertial_as_read(rot_base_tool, accel_prev_base);
+            for (l, i) in load.iter_mut().zip(inertial) {
+                *l += i;
+            }
             if w.frame != WrenchFrame::SensorAtTcp as u32 {
                 // A reading in base axes: the load too.
                 let (f, m) =
@@ -147,10 +223,10 @@ mod tests {
         let at = |c: [f64; 6]| reading(std::array::from_fn(|i| c[i] + bias[i] + load[i]));
         for _ in 0..100 {
             assert!(f.taring());
-            assert_eq!(f.process(&at([0.0; 6]), &rot).force, [0.0; 3]);
+            assert_eq!(f.process(&at([0.0; 6]), &rot, &robot::Vec6::zeros()).force, [0.0; 3]);
         }
         assert!(!f.taring());
-        let out = f.process(&at([0.0, 0.0, 10.0, 0.0, 0.0, 0.0]), &rot);
+        let out = f.process(&at([0.0, 0.0, 10.0, 0.0, 0.0, 0.0]), &rot, &robot::Vec6::zeros());
         assert!((out.force[2] - 10.0).abs() < 1e-12 && out.force[0].abs() < 1e-12, "{out:?}");
     }
 }

@@ -103,7 +103,7 @@ impl Controller {
         let qd = Vec6::from(state.qd);
         let sensed;
         let wrench = if self.sensing.is_active() {
-            sensed = self.sensing.process(wrench, &self.law.robot().frames(&q).rot[6]);
+            sensed = self.sensing.process(wrench, &self.law.robot().frames(&q).rot[6], &self.law.last_accel_base());
             &sensed
         } else {
             wrench
