@@ -111,6 +111,8 @@ pub struct ControlLaw {
     engage_v0_mps: f64,
     engage_tick: u32,
     engage_ticks: u32,
+    /// The task acceleration a_x (TCP, base axes, linear then angular) of the last step.
+    last_accel_base: Vec6,
 }
 
 /// Over this time the impedance's damping (6.3) takes over the normal velocity the wheel had
@@ -132,7 +134,13 @@ impl ControlLaw {
             engage_v0_mps: 0.0,
             engage_tick: 0,
             engage_ticks: 0,
+            last_accel_base: Vec6::zeros(),
         }
+    }
+
+    /// The TCP acceleration (linear then angular, base axes) the last step commanded.
+    pub fn last_accel_base(&self) -> Vec6 {
+        self.last_accel_base
     }
 
     pub fn robot(&self) -> &Robot {
@@ -236,6 +244,7 @@ impl ControlLaw {
         // (7.6): a_q = J⁻¹ (a_x − J̇ q̇).
         let jdqd = self.robot.jdot_qdot_point(&kin.frames, &kin.pos_base_m, qd);
         let a_x = Vec6::new(a_lin_base.x, a_lin_base.y, a_lin_base.z, a_ang_base.x, a_ang_base.y, a_ang_base.z);
+        self.last_accel_base = a_x;
         let (a_q, jacobian_ok) = match kin.jacobian.lu().solve(&(a_x - jdqd)) {
             Some(a) if a.iter().all(|x| x.is_finite()) => (a, true),
             _ => (Vec6::zeros(), false),
@@ -255,11 +264,11 @@ impl ControlLaw {
     }
 }
 
-/// The controller's robot model: the scenario's arm and tool ([`scenarios::geometry::tool`]) with armature
+/// The controller's robot model: the scenario's arm and the tool it believes ([`scenarios::geometry::controller_tool`]) with armature
 /// and viscous friction, deliberately WITHOUT `robot.plant_inertia_scale` (that is the plant's
-/// mismatch).
+/// mismatch, like `[mismatch] link_inertia_scale` and `[drives]`).
 pub fn controller_robot(s: &scenarios::Scenario) -> Robot {
-    Robot::irb2400_with_tool(scenarios::geometry::tool(s))
+    Robot::irb2400_with_tool(scenarios::geometry::controller_tool(s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms))
 }

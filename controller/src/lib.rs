@@ -7,6 +7,7 @@ pub mod egm_force;
 pub mod gains;
 pub mod law;
 pub mod reference;
+pub mod sensing;
 pub mod step;
 
 pub use step::Controller;

@@ -14,6 +14,7 @@ use scenarios::Scenario;
 use crate::gains::Gains;
 use crate::law::ControlLaw;
 use crate::reference::{ReferenceGenerator, ReferenceParams};
+use crate::sensing::ForceSensing;
 
 /// Measured wrench on the tool in base axes at the TCP, (force, torque) as one 6-vector
 /// (messages/README.md, "Frames and signs").
@@ -30,6 +31,8 @@ pub use crate::law::controller_robot;
 /// The force controller of a scenario, between ticks.
 pub struct Controller {
     law: ControlLaw,
+    /// Tool load compensation, tare and force filter (`sensing.rs`; inactive by default).
+    sensing: ForceSensing,
     reference: ReferenceGenerator,
     contract_version: u32,
     controller_id: u64,
@@ -47,6 +50,7 @@ impl Controller {
             ControlLaw::new(controller_robot(s), TaskFrame::from_scenario(s), Gains::from_scenario(s, f64::NAN), tool_down_rotation());
         Controller {
             law,
+            sensing: ForceSensing::from_scenario(s),
             reference: ReferenceGenerator::new(ReferenceParams::from_scenario(s)),
             contract_version: messages::CONTRACT_VERSION,
             controller_id: 0,
@@ -71,6 +75,11 @@ impl Controller {
         &self.law
     }
 
+    /// The sensor processing (tare offset, tool load).
+    pub fn sensing(&self) -> &ForceSensing {
+        &self.sensing
+    }
+
     pub fn reference(&self) -> &ReferenceGenerator {
         &self.reference
     }
@@ -92,6 +101,13 @@ impl Controller {
     pub fn process(&mut self, state: &JointState, wrench: &Wrench) -> (JointTorque, ControllerDiagnostics) {
         let q = Vec6::from(state.q);
         let qd = Vec6::from(state.qd);
+        let sensed;
+        let wrench = if self.sensing.is_active() {
+            sensed = self.sensing.process(wrench, &self.law.robot().frames(&q).rot[6], &self.law.last_accel_base());
+            &sensed
+        } else {
+            wrench
+        };
         let first = self.first;
         if first {
             // A take-over of a running plant first moves the TCP from where it is to the start

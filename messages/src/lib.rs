@@ -127,6 +127,9 @@ pub mod state_flags {
     pub const REFLEX: u32 = 1 << 4;
     /// A joint is beyond its working range, in its mechanical end stop.
     pub const END_STOP: u32 = 1 << 5;
+    /// The force/torque sensor (scenario `[sensor]`) reads beyond its range on some axis: the
+    /// wrench is clipped there (an `/events` entry marks the start and the end).
+    pub const SENSOR_SATURATED: u32 = 1 << 6;
 }
 
 /// Joint state of tick `tick`, published by the plant at the start of the tick (plant → controller).

@@ -5,6 +5,7 @@
 
 pub mod arbiter;
 pub mod contact;
+pub mod drives;
 pub mod egm;
 pub mod gate;
 pub mod histogram;
@@ -14,8 +15,10 @@ pub mod loop_lockstep;
 pub mod loop_rt;
 pub mod physics;
 pub mod probe;
+pub mod rng;
 pub mod rt;
 pub mod run;
+pub mod sensor;
 mod stack_text;
 pub mod stats;
 pub mod table_cache;

@@ -64,6 +64,28 @@ pub struct PlantTick {
     last_log_tick: Option<u64>,
     first: FirstTicks,
     strip: StripRecord,
+    /// `[sensor]`: the force/torque sensor's chain and this tick's reading (None: exact wrench).
+    sensor: Option<Sensor>,
+    /// `[drives]` with encoders: what the state reports as q and q̇ (None: exact).
+    encoders: Option<crate::drives::Encoders>,
+}
+
+/// The cell's sensor between ticks: its chain, the tool's load on it and the current reading.
+struct Sensor {
+    chain: crate::sensor::SensorChain,
+    load: crate::sensor::ToolLoad,
+    reading: [f64; 6],
+    saturated: bool,
+}
+
+impl Sensor {
+    /// Read the sensor at the physics' current state (one sample of the chain).
+    fn read(&mut self, physics: &Physics) {
+        let (f, m) = physics.wrench_on_tool();
+        let load = self.load.sample(physics.robot(), &physics.q(), &physics.qd());
+        let input = std::array::from_fn(|i| if i < 3 { f[i] } else { m[i - 3] } + load[i]);
+        (self.reading, self.saturated) = self.chain.sample(&input);
+    }
 }
 
 impl PlantTick {
@@ -81,7 +103,23 @@ impl PlantTick {
             ),
             torque_limit_nm: robot::Robot::TORQUE_LIMIT_NM,
         });
+        let period_s = l.period_s;
+        let sensor = s.sensor.enabled.then(|| {
+            let mut sensor = Sensor {
+                chain: crate::sensor::SensorChain::new(&s.sensor, period_s),
+                load: crate::sensor::ToolLoad::new(physics.robot(), period_s),
+                reading: [0.0; 6],
+                saturated: false,
+            };
+            sensor.read(&physics);
+            sensor
+        });
+        let encoders = (s.drives.enabled
+            && (s.drives.encoder_counts_per_rev.iter().any(|&c| c > 0.0) || s.drives.velocity_filter_hz > 0.0))
+            .then(|| crate::drives::Encoders::new(&s.drives, period_s, &physics.q()));
         PlantTick {
+            sensor,
+            encoders,
             physics,
             gate,
             reflex_limits: ReflexLimits::from_scenario(s),
@@ -150,13 +188,20 @@ impl PlantTick {
         if self.physics.limits().joint_in_end_stop(&self.physics.q()).is_some() {
             flags |= state_flags::END_STOP;
         }
+        if self.sensor.as_ref().is_some_and(|s| s.saturated) {
+            flags |= state_flags::SENSOR_SATURATED;
+        }
+        let (q, qd) = match &self.encoders {
+            Some(e) => (e.q(), e.qd()),
+            None => (self.physics.q(), self.physics.qd()),
+        };
         JointState {
             contract_version: CONTRACT_VERSION,
             plant_status: self.gate.status() as u32,
             tick: self.tick,
             sim_time_s: self.sim_time_s(),
-            q: self.physics.q().into(),
-            qd: self.physics.qd().into(),
+            q: q.into(),
+            qd: qd.into(),
             tau_applied: self.gate.last_applied().into(),
             period_s: self.period_ns as f64 * 1e-9,
             flags,
@@ -166,7 +211,10 @@ impl PlantTick {
     }
 
     fn wrench(&self) -> Wrench {
-        let (force, torque) = self.physics.wrench_on_tool();
+        let (force, torque) = match &self.sensor {
+            Some(s) => ([s.reading[0], s.reading[1], s.reading[2]], [s.reading[3], s.reading[4], s.reading[5]]),
+            None => self.physics.wrench_on_tool(),
+        };
         Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick: self.tick, force, torque }
     }
 
@@ -212,7 +260,9 @@ impl PlantTick {
         let prev_refused = self.prev.as_ref().is_some_and(|d| d.refused.is_some());
         self.report(tick, t, &decision, prev_refused, recorder.as_deref_mut());
         self.physics.step_tick(&decision.tau);
-        self.check_limits(tick + 1, t + self.period_ns as f64 * 1e-9, recorder);
+        let t_next = t + self.period_ns as f64 * 1e-9;
+        self.read_sensors(tick + 1, t_next, recorder.as_deref_mut());
+        self.check_limits(tick + 1, t_next, recorder);
         self.physics.fill_strip_record(&mut self.strip);
         if let Some(a) = torque.filter(|_| !decision.held) {
             self.applied_answer_tick = a.tick;
@@ -291,6 +341,32 @@ impl PlantTick {
             }
             tracing::info!("{}", s.as_str());
             event(recorder, tick, t, EventKind::ControllerChange, s.as_str());
+        }
+    }
+
+    /// After integrating: the cell's sensor and encoders read the new state, which is tick
+    /// `tick`'s; a sensor entering or leaving saturation is an `/events` entry.
+    fn read_sensors(&mut self, tick: u64, t: f64, recorder: Option<&mut Recorder>) {
+        if let Some(e) = self.encoders.as_mut() {
+            e.update(&self.physics.q(), &self.physics.qd());
+        }
+        let Some(sensor) = self.sensor.as_mut() else { return };
+        let was = sensor.saturated;
+        sensor.read(&self.physics);
+        if sensor.saturated != was {
+            let mut s = StackText::new();
+            if sensor.saturated {
+                let r = sensor.reading;
+                let _ = write!(
+                    s,
+                    "tick {tick}: force/torque sensor saturated: reads ({:.3}, {:.3}, {:.3}) N, ({:.4}, {:.4}, {:.4}) N m at its range",
+                    r[0], r[1], r[2], r[3], r[4], r[5]
+                );
+                tracing::warn!("{}", s.as_str());
+            } else {
+                let _ = write!(s, "tick {tick}: force/torque sensor back within its range");
+            }
+            event(recorder, tick, t, EventKind::Info, s.as_str());
         }
     }
 

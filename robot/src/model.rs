@@ -164,6 +164,25 @@ impl Robot {
         robot
     }
 
+    /// Link `i`'s mass and inertia scaled by `scale[i]` (the tool and the armature unchanged):
+    /// a plant whose links the controller's model gets wrong by stated factors.
+    pub fn scaled_links(&self, scale: &[f64; 6]) -> Robot {
+        let mut robot = self.clone();
+        for (link, f) in robot.links.iter_mut().zip(scale) {
+            *link = link.scaled(*f);
+        }
+        robot.rebuild();
+        robot
+    }
+
+    /// The same robot carrying `tool` instead.
+    pub fn with_tool(&self, tool: Tool) -> Robot {
+        let mut robot = self.clone();
+        robot.tool = Some(tool);
+        robot.rebuild();
+        robot
+    }
+
     /// The tool, if any.
     pub fn tool(&self) -> Option<&Tool> {
         self.tool.as_ref()

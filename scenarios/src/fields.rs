@@ -270,6 +270,13 @@ pub static FIELDS: &[Field] = &[
     num("controller.rotation_bandwidth_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Rotational PD bandwidth; below the Nyquist frequency."),
     num("controller.joint_damping_nms", "N m s/rad", NON_NEGATIVE, "Joint-space damping added to the control torque (small, for the wrist)."),
     num("controller.strip_stiffness_n_per_m", "N/m", POSITIVE, "Driving-point stiffness of the strip under the wheel, the force-loop design rule's plant (`rig design` reports it for a model)."),
+    with_rule(
+        num("controller.tare_s", "s", range(lo_in(0.0), hi_in(10.0)), "Tare in free air: for this long from its first state (at rest in the start pose) the controller averages the measured wrench less the tool's nominal load and subtracts the mean from then on (0: no tare)."),
+        "at most trajectory.settle_s (the tare ends before the approach)",
+        |s| if s.controller.tare_s <= s.trajectory.settle_s { Ok(()) } else { Err(format!("trajectory.settle_s is {} s", fmt_num(s.trajectory.settle_s))) },
+    ),
+    flag("controller.tool_load_compensation", "Subtract the tool's nominal gravity load (its mass and centre as the controller believes them, rotating with the tool) from the measured wrench."),
+    num("controller.force_filter_hz", "Hz", range(lo_in(0.0), per(0.5, "loop.period_s", false)), "First-order low-pass on the measured wrench (0: none); below the Nyquist frequency."),
     // [recording]
     flag("recording.enabled", "Record the run to MCAP."),
     int("recording.queue_capacity", "records", range(lo_in(16.0), hi_in(1048576.0)), "Bounded queue between the loop thread and the writer thread."),
@@ -307,6 +314,37 @@ pub static FIELDS: &[Field] = &[
     num("egm.servo_bandwidth_hz", "Hz", range(lo_ex(0.0), per(0.5, "loop.period_s", false)), "Natural frequency of the emulated joint position/velocity servo (with model feed-forward)."),
     num("egm.servo_damping_ratio", "", range(lo_ex(0.0), hi_in(10.0)), "Damping ratio of that servo."),
     num("egm.force_phase_margin_deg", "°", range(lo_ex(0.0), hi_ex(90.0)), "The EGM force controller (`egm-controller`): phase margin its admittance is designed for, with the motion controller's delay and low-pass in the loop."),
+    // [sensor]
+    flag("sensor.enabled", "Model the six-axis force/torque sensor between flange and tool bracket (`false`: the exact contact wrench)."),
+    int("sensor.seed", "", range(lo_in(0.0), hi_in(4294967295.0)), "Seed of every random draw of the cell (bias, drift, noise); same seed, bit-identical lockstep run."),
+    Field { key: "sensor.bias_range", kind: Kind::Floats(6), unit: "N, N m", range: NON_NEGATIVE, rule: None, meaning: "Power-on bias per axis [Fx, Fy, Fz, Tx, Ty, Tz], drawn uniformly within ± this." },
+    Field { key: "sensor.drift_per_sqrt_s", kind: Kind::Floats(6), unit: "N/√s, N m/√s", range: NON_NEGATIVE, rule: None, meaning: "Drift per axis: a random walk whose standard deviation grows by this per √s." },
+    Field { key: "sensor.noise_sd", kind: Kind::Floats(6), unit: "N, N m", range: NON_NEGATIVE, rule: None, meaning: "White noise per axis, standard deviation of one sample." },
+    num("sensor.lowpass_hz", "Hz", range(lo_in(0.0), per(0.5, "loop.period_s", false)), "First-order low-pass of the sensor (0: none); below the Nyquist frequency."),
+    int("sensor.delay_ticks", "ticks", range(lo_in(0.0), hi_in(100.0)), "Sample delay: the wrench of tick k is published at tick k + this."),
+    Field { key: "sensor.resolution", kind: Kind::Floats(6), unit: "N, N m", range: NON_NEGATIVE, rule: None, meaning: "Quantisation step per axis (0: none)." },
+    Field { key: "sensor.range", kind: Kind::Floats(6), unit: "N, N m", range: NON_NEGATIVE, rule: None, meaning: "Calibrated range per axis: the output clips at ± this, the state's SENSOR_SATURATED flag is set and `/events` says so (0: none)." },
+    // [drives]
+    flag("drives.enabled", "Model the joint drives and encoders: friction with stiction, torque-constant errors, encoder quantisation, a filtered velocity (`false`: ideal)."),
+    Field { key: "drives.coulomb_nm", kind: Kind::Floats(6), unit: "N m", range: NON_NEGATIVE, rule: None, meaning: "Coulomb (kinetic) friction per joint." },
+    with_rule(
+        Field { key: "drives.breakaway_nm", kind: Kind::Floats(6), unit: "N m", range: NON_NEGATIVE, rule: None, meaning: "Breakaway (static) friction per joint: a joint sticks under less." },
+        "at least drives.coulomb_nm, joint by joint",
+        |s| match (0..6).find(|&i| s.drives.breakaway_nm[i] < s.drives.coulomb_nm[i]) {
+            None => Ok(()),
+            Some(i) => Err(format!("joint {} has breakaway {} N m < Coulomb {} N m", i + 1, fmt_num(s.drives.breakaway_nm[i]), fmt_num(s.drives.coulomb_nm[i]))),
+        },
+    ),
+    Field { key: "drives.stribeck_radps", kind: Kind::Floats(6), unit: "rad/s", range: NON_NEGATIVE, rule: None, meaning: "Stribeck velocity per joint: friction falls from breakaway to Coulomb as exp(-(q̇/v_s)²) (0: at once, Coulomb at any speed, breakaway only to start)." },
+    Field { key: "drives.viscous_nms", kind: Kind::Floats(6), unit: "N m s/rad", range: NON_NEGATIVE, rule: None, meaning: "Viscous friction per joint that the controller's model does not know (on top of `robot.viscous_nms`)." },
+    Field { key: "drives.torque_constant_error", kind: Kind::Floats(6), unit: "", range: range(lo_in(-0.5), hi_in(0.5)), rule: None, meaning: "Torque-constant error per joint: the drive applies (1 + this) times the command." },
+    Field { key: "drives.encoder_counts_per_rev", kind: Kind::Floats(6), unit: "counts", range: NON_NEGATIVE, rule: None, meaning: "Encoder counts per joint revolution: the state's q is quantised to 2π/counts (0: exact)." },
+    num("drives.velocity_filter_hz", "Hz", range(lo_in(0.0), per(0.5, "loop.period_s", false)), "The state's q̇: the encoder's difference quotient through a first-order low-pass at this cut-off (0: the exact q̇)."),
+    // [mismatch]
+    num("mismatch.tool_mass_error", "", range(lo_ex(-1.0), hi_in(1.0)), "Relative error of the tool mass the controller believes: (1 + this) robot.tool_mass_kg."),
+    Field { key: "mismatch.tool_com_error_m", kind: Kind::Floats(3), unit: "m", range: range(lo_in(-0.5), hi_in(0.5)), rule: None, meaning: "Error of the tool's centre of mass the controller believes, flange axes." },
+    num("mismatch.tool_inertia_error", "", range(lo_ex(-1.0), hi_in(1.0)), "Relative error of the tool inertia the controller believes."),
+    Field { key: "mismatch.link_inertia_scale", kind: Kind::Floats(6), unit: "", range: range(lo_ex(0.0), hi_in(10.0)), rule: None, meaning: "Per link, the plant's mass and inertia against the controller's model (1 = exact; multiplies robot.plant_inertia_scale)." },
 ];
 
 /// The field called `key` (`section.field`).

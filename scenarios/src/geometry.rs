@@ -78,6 +78,19 @@ pub fn tool(s: &Scenario) -> Tool {
     Tool::wheel_on_bracket(s.robot.tool_mass_kg, s.robot.tool_offset_m, s.robot.wheel_radius_mm * 1e-3)
 }
 
+/// The tool as the controller believes it: [`tool`] with `[mismatch]`'s errors of mass, centre
+/// and inertia (the same tool when there are none).
+pub fn controller_tool(s: &Scenario) -> Tool {
+    let mut t = tool(s);
+    let m = &s.mismatch;
+    if !m.is_none() {
+        t.mass_kg *= 1.0 + m.tool_mass_error;
+        t.com_flange_m += Vector3::from(m.tool_com_error_m);
+        t.inertia_com *= 1.0 + m.tool_inertia_error;
+    }
+    t
+}
+
 /// Tool orientation of the whole run, base frame: pointing straight down, wheel axis across the
 /// strip ([`robot::tool_down_pose`]'s rotation by π about base x).
 pub fn tool_down_rotation() -> Matrix3<f64> {

@@ -11,8 +11,10 @@
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+mod cell;
 mod check;
 pub mod fields;
+pub use cell::{DrivesConfig, MismatchConfig, SensorConfig};
 pub mod geometry;
 
 /// Where a value of a scenario comes from, for messages.
@@ -138,6 +140,12 @@ pub struct Scenario {
     pub safety: SafetyConfig,
     /// ABB Externally Guided Motion: the plant acts as the robot controller (off by default).
     pub egm: EgmConfig,
+    /// The realistic cell's force/torque sensor (off by default: the exact wrench).
+    pub sensor: SensorConfig,
+    /// The realistic cell's drives and encoders (off by default: ideal drives).
+    pub drives: DrivesConfig,
+    /// What the controller believes against what the plant is (none by default).
+    pub mismatch: MismatchConfig,
 }
 
 /// Reflex limits of the plant (DESIGN section 10): crossing one puts the plant into safe stop at
@@ -489,6 +497,15 @@ pub struct ControllerConfig {
     /// comes from here; the default is 1/G(0) of the default reduced model (1 mm mesh, bonded)
     /// under the wheel at z_a = 20 mm, as `rig design` reports it.
     pub strip_stiffness_n_per_m: f64,
+    /// Tare in free air: for this long from its first state (the start pose, before the
+    /// approach) the controller averages the measured wrench less the tool's nominal load and
+    /// takes the mean as the sensor's offset, s (0: no tare).
+    pub tare_s: f64,
+    /// Subtract the tool's nominal gravity load (mass and centre of `robot.*` as the controller
+    /// believes them, rotating with the tool) from the measured wrench.
+    pub tool_load_compensation: bool,
+    /// First-order low-pass on the measured wrench, Hz (0: none).
+    pub force_filter_hz: f64,
 }
 
 impl Default for ControllerConfig {
@@ -504,6 +521,9 @@ impl Default for ControllerConfig {
             rotation_bandwidth_hz: 10.0,
             joint_damping_nms: 0.0,
             strip_stiffness_n_per_m: 2.87e4,
+            tare_s: 0.0,
+            tool_load_compensation: false,
+            force_filter_hz: 0.0,
         }
     }
 }

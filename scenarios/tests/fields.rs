@@ -87,8 +87,12 @@ fn bad_values(f: &Field) -> Vec<(String, String, usize)> {
         Kind::Floats(n) => {
             out.extend(["\"x\"", "1", "[0, 0]"].map(plain));
             out.push((format!("[{}]", vec!["0"; n + 1].join(", ")), key.clone(), 0));
+            // the other elements at a valid value (0 where the range has it); indices wrap for
+            // arrays shorter than six
+            let fill = if f.range.contains(0.0, None) { "0" } else { "1" };
             let with = |i: usize, x: &str| {
-                let mut v = vec!["0".to_string(); n];
+                let i = i % n;
+                let mut v = vec![fill.to_string(); n];
                 v[i] = x.into();
                 (format!("[{}]", v.join(", ")), format!("{key}[{i}]"), 0)
             };
@@ -165,7 +169,7 @@ fn the_defaults_are_valid_and_an_empty_file_gets_them() {
 fn a_scenario_written_out_in_full_loads_back() {
     // sweeps and `--set` write whole tables; every shipped scenario survives that round trip
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for name in ["default.toml", "thesis.toml", "bond.toml", "bond_scheduled.toml"] {
+    for name in ["default.toml", "thesis.toml", "bond.toml", "bond_scheduled.toml", "cell.toml"] {
         let s = Scenario::load(&dir.join(name)).unwrap();
         let text = toml::to_string(&s).unwrap();
         assert_eq!(load(&text).unwrap_or_else(|e| panic!("{name}: {e}")), s, "{name}");

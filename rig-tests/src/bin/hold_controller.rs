@@ -24,6 +24,10 @@ struct Args {
     /// this version, and the plant's states are NOT checked against it, so the plant gets to refuse.
     #[arg(long, default_value_t = CONTRACT_VERSION)]
     contract_version: u32,
+    /// How long the plant may be silent before it is taken for dead, ms (long lockstep runs on
+    /// a loaded host stall for more than the default).
+    #[arg(long, default_value_t = 100)]
+    silence_ms: u64,
     /// Constant torque added to joint 1, N m (to make this controller's output recognisable).
     #[arg(long, default_value_t = 0.0)]
     offset_nm: f64,
@@ -111,8 +115,8 @@ fn run(a: &Args) -> anyhow::Result<()> {
         // Wake on the plant's notification; a timeout only serves the dead-plant check.
         let _: Wake = ports.wait_state(Instant::now() + Duration::from_millis(20));
         let Some(st) = ports.receive_state() else {
-            if hold.is_some() && last_state.elapsed() > Duration::from_millis(100) {
-                anyhow::bail!("plant on rig {:?} is silent for 100 ms: assuming it is dead", a.rig);
+            if hold.is_some() && last_state.elapsed() > Duration::from_millis(a.silence_ms) {
+                anyhow::bail!("plant on rig {:?} is silent for {} ms: assuming it is dead", a.rig, a.silence_ms);
             }
             continue;
         };
