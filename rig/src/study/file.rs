@@ -464,6 +464,15 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_studies_are_valid() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../studies");
+        for name in ["default_mc.toml", "cell_mc.toml"] {
+            let s = Study::load(&dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+            assert_eq!(s.points().len(), s.cases, "{name}");
+        }
+    }
+
+    #[test]
     fn points_follow_the_distributions_and_the_seed() {
         let body = "cases = 400\nseed = 3\n[[parameter]]\nfield = \"bulge.height_mm\"\ndistribution = \"uniform\"\nmin = 0.1\nmax = 0.4\n\
                     [[parameter]]\nfield = \"robot.tool_mass_kg\"\ndistribution = \"normal\"\nmean = 2.0\nsd = 0.1\nmin = 1.8\nmax = 2.2\n\
