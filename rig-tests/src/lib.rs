@@ -347,6 +347,16 @@ pub fn physics_digest(rec: &recording_tools::read::Recording) -> String {
     )
 }
 
+/// An executable script `dir/name` that runs `program` with `args` before the arguments it gets
+/// (`rig run --controller` takes a path without arguments: this is how a test gives them).
+pub fn exec_wrapper(dir: &Path, name: &str, program: &Path, args: &[&str]) -> PathBuf {
+    let path = dir.join(name);
+    let args: Vec<String> = args.iter().map(|a| format!("'{a}'")).collect();
+    std::fs::write(&path, format!("#!/bin/sh\nexec '{}' {} \"$@\"\n", program.display(), args.join(" "))).unwrap();
+    std::fs::set_permissions(&path, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    path
+}
+
 /// rig-client's C and C++ examples, built as a user on a fresh machine builds them: the library
 /// installed into a new prefix by its one install command (`rig-client/install.sh --prefix P`),
 /// then each example configured by the system's cmake from a new, empty build directory against
