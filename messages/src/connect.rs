@@ -94,7 +94,7 @@ const POLL: Duration = Duration::from_millis(10);
 
 impl ConnectWatch {
     /// Start watching rig `rig` for the controller process `pid`; the verdict comes
-    /// `timeout` from now ([`Self::verdict`]). Start it before the controller, so that no early
+    /// `timeout` after the plant's first state ([`Self::verdict`]). Start it before the controller, so that no early
     /// torque goes unseen.
     pub fn spawn(rig: &str, pid_of: Arc<std::sync::atomic::AtomicU32>, timeout: Duration) -> Result<ConnectWatch, PortError> {
         let stop = Arc::new(AtomicBool::new(false));
@@ -149,10 +149,13 @@ fn watch(
             return None;
         }
     };
-    let until = Instant::now() + timeout;
+    // The timeout counts from the plant's first state: before it (a strip model being built, for
+    // seconds or minutes) there is nothing to answer.
+    let mut until: Option<Instant> = None;
     let mut other_version = None;
     while !stop.load(Ordering::Acquire) {
         while let Ok(Some(s)) = state_sub.receive() {
+            until.get_or_insert_with(|| Instant::now() + timeout);
             // Running or holding: the plant applied an answer (refused ones lead to the safe
             // stop without either).
             if s.plant_status == PlantStatus::Running as u32 || s.plant_status == PlantStatus::HoldingTorque as u32 {
@@ -165,7 +168,7 @@ fn watch(
             }
             other_version = Some(t.contract_version);
         }
-        if Instant::now() >= until {
+        if until.is_some_and(|u| Instant::now() >= u) {
             let pid = pid_of.load(Ordering::Acquire);
             return Some(diagnose(rig, &node, &torque, pid, other_version));
         }

@@ -250,8 +250,8 @@ pub struct LoopConfig {
     /// How long a peer that is alive (its iceoryx2 node is not dead) but silent is waited for
     /// before it is treated as dead, s (a stalled host or SIGSTOP is not a death).
     pub peer_stall_timeout_s: f64,
-    /// How long `rig` waits for a controller process it started to answer its first state (in
-    /// lockstep: tick 0), s; a controller alive but silent that long is named, with what `rig`
+    /// How long `rig` waits, from the plant's first state, for the controller process it started
+    /// to answer one (in lockstep: tick 0), s; a controller alive but silent that long is named, with what `rig`
     /// saw of it, and the run ends with exit 3.
     pub connect_timeout_s: f64,
     /// Real-time mode: the plant busy-polls for the torque this long after publishing before it
