@@ -11,6 +11,7 @@
 //! peer with another version is refused (see [`check_version`]).
 
 pub mod child;
+pub mod connect;
 pub mod host;
 pub mod liveness;
 #[cfg(feature = "logging")]

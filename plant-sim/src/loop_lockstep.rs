@@ -48,7 +48,8 @@ impl PlantLoop<'_> {
             } else if self.plant.gate().status() == PlantStatus::WaitingForController {
                 // Start-up: hold tick 0 until a controller answers it.
                 let end = pb.budget_end_ns(&p);
-                while !rt::stop_requested() {
+                // rig's report that the controller ended (or never connected) ends it too.
+                while !rt::stop_requested() && !rt::controller_end_pending() {
                     let lost = self.wait_for_answers(tick, Instant::now() + LOCKSTEP_REPUBLISH, &mut run.answers, Wait::Watchdog);
                     run.stats.note_lost_wakeups(lost);
                     if !run.answers.is_empty() {

@@ -347,6 +347,7 @@ impl PlantLoop<'_> {
             run.gone_reported = true;
             let mut s = StackText::new();
             let _ = match ended {
+                Some(end @ rt::ControllerEnd::NeverConnected { .. }) => write!(s, "tick {tick}: the controller {end}"),
                 Some(end) => write!(s, "tick {tick}: controller process ended ({end})"),
                 None => write!(s, "tick {tick}: the active controller's node is dead"),
             };

@@ -175,6 +175,12 @@ pub enum ControllerEnd {
     Exit(i32),
     Signal(i32),
     Unknown,
+    /// The process (`pid`) is alive but answered no state within the connect timeout; `rig`
+    /// stops it. `seen`: what `rig` saw of it (`messages::connect::NotConnected::code`).
+    NeverConnected {
+        pid: u32,
+        seen: u8,
+    },
 }
 
 impl std::fmt::Display for ControllerEnd {
@@ -183,16 +189,26 @@ impl std::fmt::Display for ControllerEnd {
             ControllerEnd::Exit(c) => write!(f, "exit status {c}"),
             ControllerEnd::Signal(s) => write!(f, "killed by signal {s}"),
             ControllerEnd::Unknown => f.write_str("unknown status"),
+            ControllerEnd::NeverConnected { pid, seen } => write!(
+                f,
+                "never connected: process {pid} answered no state within loop.connect_timeout_s ({}); rig stops it",
+                messages::connect::NotConnected::what(*seen)
+            ),
         }
     }
 }
 
-/// The sigqueue value for `end` (never 0).
+/// Tag of a never-connected report in the sigqueue value: above every exit status code.
+const NEVER_CONNECTED: i32 = 1 << 29;
+
+/// The sigqueue value for `end` (never 0). A never-connected report packs what was seen (3
+/// bits) and the pid (up to 2^22, Linux's pid_max limit) under [`NEVER_CONNECTED`].
 pub fn encode_controller_end(end: ControllerEnd) -> i32 {
     match end {
         ControllerEnd::Exit(c) => 1 + c.clamp(0, 255),
         ControllerEnd::Signal(s) => -s.clamp(1, 64),
         ControllerEnd::Unknown => i32::MIN,
+        ControllerEnd::NeverConnected { pid, seen } => NEVER_CONNECTED | (i32::from(seen & 7) << 22) | (pid & 0x3f_ffff) as i32,
     }
 }
 
@@ -204,10 +220,18 @@ pub fn controller_end_pending() -> bool {
 
 /// Taken once: the controller-end report `rig` sent, if any.
 pub fn take_controller_end() -> Option<ControllerEnd> {
-    let v = CONTROLLER_ENDED.swap(0, Ordering::Relaxed);
+    decode_controller_end(CONTROLLER_ENDED.swap(0, Ordering::Relaxed))
+}
+
+/// The report of a sigqueue value ([`encode_controller_end`]); 0 is none.
+pub fn decode_controller_end(v: i32) -> Option<ControllerEnd> {
     match v {
         0 => None,
         i32::MIN => Some(ControllerEnd::Unknown),
+        // Positive only: a signal's negative value has the tag bit set too.
+        v if v > 0 && v & NEVER_CONNECTED != 0 => {
+            Some(ControllerEnd::NeverConnected { pid: (v & 0x3f_ffff) as u32, seen: ((v >> 22) & 7) as u8 })
+        }
         v if v > 0 => Some(ControllerEnd::Exit(v - 1)),
         v => Some(ControllerEnd::Signal(-v)),
     }
@@ -222,4 +246,29 @@ pub fn stop_requested() -> bool {
 /// Request a stop from inside the process (tests, fatal conditions).
 pub fn request_stop() {
     STOP.store(true, Ordering::Relaxed);
+}
+
+#[cfg(test)]
+mod controller_end_tests {
+    use super::*;
+
+    /// Every report survives the sigqueue value, a signal's negative value included (its tag bit
+    /// is set too, which once read a SIGKILL as "never connected").
+    #[test]
+    fn controller_end_reports_round_trip() {
+        for end in [
+            ControllerEnd::Exit(0),
+            ControllerEnd::Exit(255),
+            ControllerEnd::Signal(9),
+            ControllerEnd::Signal(15),
+            ControllerEnd::Unknown,
+            ControllerEnd::NeverConnected { pid: 4_194_303, seen: 4 },
+            ControllerEnd::NeverConnected { pid: 1, seen: 0 },
+        ] {
+            let v = encode_controller_end(end);
+            assert_ne!(v, 0);
+            assert_eq!(decode_controller_end(v), Some(end), "{v:#x}");
+        }
+        assert_eq!(decode_controller_end(0), None);
+    }
 }

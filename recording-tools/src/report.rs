@@ -287,15 +287,21 @@ pub fn format_text(n: &ReportNumbers) -> String {
     if let Some(t) = &n.integrity_detail {
         let _ = writeln!(s, "WARNING     {t}");
     }
-    let _ = writeln!(
-        s,
-        "ticks       {} ({}..={}), {:.3} s at {:.0} Hz",
-        n.ticks,
-        n.first_tick,
-        n.last_tick,
-        n.duration_s,
-        if n.period_s > 0.0 { 1.0 / n.period_s } else { 0.0 }
-    );
+    if n.ticks == 0 {
+        // Not "0 (0..=0), 0.000 s at 0 Hz": nothing was integrated (in lockstep: no controller
+        // answered tick 0).
+        let _ = writeln!(s, "ticks       0: no tick was integrated");
+    } else {
+        let _ = writeln!(
+            s,
+            "ticks       {} ({}..={}), {:.3} s at {:.0} Hz",
+            n.ticks,
+            n.first_tick,
+            n.last_tick,
+            n.duration_s,
+            if n.period_s > 0.0 { 1.0 / n.period_s } else { 0.0 }
+        );
+    }
     let _ = writeln!(s, "misses      {}", n.misses);
     let _ = writeln!(s, "safe stops  {}", n.safe_stops);
     let _ = writeln!(s, "dropped     {}{}", n.dropped, if n.dropped > 0 { "  (RECORDING INCOMPLETE)" } else { "" });

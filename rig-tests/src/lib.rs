@@ -347,6 +347,69 @@ pub fn physics_digest(rec: &recording_tools::read::Recording) -> String {
     )
 }
 
+/// An executable script `dir/name` that runs `program` with `args` before the arguments it gets
+/// (`rig run --controller` takes a path without arguments: this is how a test gives them).
+pub fn exec_wrapper(dir: &Path, name: &str, program: &Path, args: &[&str]) -> PathBuf {
+    let path = dir.join(name);
+    let args: Vec<String> = args.iter().map(|a| format!("'{a}'")).collect();
+    std::fs::write(&path, format!("#!/bin/sh\nexec '{}' {} \"$@\"\n", program.display(), args.join(" "))).unwrap();
+    std::fs::set_permissions(&path, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    path
+}
+
+/// rig-client's C and C++ examples, built as a user on a fresh machine builds them: the library
+/// installed into a new prefix by its one install command (`rig-client/install.sh --prefix P`),
+/// then each example configured by the system's cmake from a new, empty build directory against
+/// that prefix (`find_package(RigClient)`) and built with the system's cc / g++.
+pub struct ClientExamples {
+    pub prefix: PathBuf,
+    /// examples/c: the minimal C controller.
+    pub c_controller: PathBuf,
+    /// examples/cpp: the C++ joint-space hold.
+    pub cpp_hold: PathBuf,
+}
+
+fn run_logged(what: &str, cmd: &mut Command) {
+    let o = cmd.output().unwrap_or_else(|e| panic!("{what}: cannot start ({e}); install cmake, g++ and pkg-config: bash .ci/deps"));
+    assert!(
+        o.status.success(),
+        "{what} failed ({}):\nstdout:\n{}\nstderr:\n{}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// The installed library and the examples built against it (once per test binary).
+pub fn client_examples() -> &'static ClientExamples {
+    static BUILT: std::sync::OnceLock<ClientExamples> = std::sync::OnceLock::new();
+    BUILT.get_or_init(|| {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let dir = temp_dir(&unique_rig("client-examples"));
+        let prefix = dir.join("prefix");
+        run_logged("rig-client/install.sh", Command::new("bash").arg(root.join("rig-client/install.sh")).arg("--prefix").arg(&prefix));
+        let build = |example: &str, target: &str| {
+            let b = dir.join(format!("build-{example}"));
+            assert!(!b.exists(), "a clean build directory");
+            run_logged(
+                &format!("cmake configure of examples/{example}"),
+                Command::new("cmake")
+                    .arg("-S")
+                    .arg(root.join("rig-client/examples").join(example))
+                    .arg("-B")
+                    .arg(&b)
+                    .arg(format!("-DCMAKE_PREFIX_PATH={}", prefix.display()))
+                    .arg("-DCMAKE_BUILD_TYPE=Release"),
+            );
+            run_logged(&format!("cmake build of examples/{example}"), Command::new("cmake").arg("--build").arg(&b));
+            b.join(target)
+        };
+        let c_controller = build("c", "minimal_controller");
+        let cpp_hold = build("cpp", "hold_controller");
+        ClientExamples { prefix, c_controller, cpp_hold }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -35,11 +35,7 @@ fn events(rec: &Recording, kind: EventKind) -> Vec<(u64, String)> {
 
 /// A script that runs `fault-controller` with `faults` and the arguments `rig` passes.
 fn fault_wrapper(dir: &Path, name: &str, faults: &[&str]) -> PathBuf {
-    let path = dir.join(name);
-    let args: Vec<String> = faults.iter().map(|a| format!("'{a}'")).collect();
-    std::fs::write(&path, format!("#!/bin/sh\nexec '{}' {} \"$@\"\n", bin("fault-controller").display(), args.join(" "))).unwrap();
-    std::process::Command::new("chmod").arg("+x").arg(&path).status().unwrap();
-    path
+    exec_wrapper(dir, name, &bin("fault-controller"), faults)
 }
 
 /// `rig run` as a user types it; `out` receives run.mcap.

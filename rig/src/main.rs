@@ -318,6 +318,7 @@ fn prepare(
         host_probe: false,
         host_probe_period_us: None,
         no_controller,
+        connect_timeout: std::time::Duration::from_secs_f64(parsed.loop_.connect_timeout_s),
     })
 }
 
@@ -376,6 +377,8 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
         Ending::Terminated => eprintln!("rig: terminated; both daemons stopped"),
         Ending::PlantFailed(why) => eprintln!("rig: PLANT FAILED: {why}"),
         Ending::ControllerFailed(why) => eprintln!("rig: CONTROLLER FAILED: {why}"),
+        // Said when it was found.
+        Ending::NeverConnected(_) => {}
     }
     // The summary's last line: the exit status and why (README, "Exit status").
     let code = outcome.exit_code();

@@ -25,13 +25,18 @@ pub fn run_summary(v: &Value) -> String {
         int(v, "drops")
     );
     s += &format!("round trip  p50 {:.1} us  p99 {:.1} us  max {:.1} us\n", num(v, "rt_p50_us"), num(v, "rt_p99_us"), num(v, "rt_max_us"));
-    s += &format!(
-        "mode {}  simulated {:.3} s in {:.3} s wall ({:.1}x real time)\n",
-        v.get("mode").and_then(Value::as_str).unwrap_or("?"),
-        num(v, "sim_s"),
-        num(v, "wall_s"),
-        num(v, "speed_factor")
-    );
+    let mode = v.get("mode").and_then(Value::as_str).unwrap_or("?");
+    if int(v, "ticks") == 0 {
+        // Not "(0.0x real time)": nothing ran (in lockstep: no controller answered tick 0).
+        s += &format!("mode {mode}  nothing simulated in {:.3} s wall: no tick was integrated\n", num(v, "wall_s"));
+    } else {
+        s += &format!(
+            "mode {mode}  simulated {:.3} s in {:.3} s wall ({:.1}x real time)\n",
+            num(v, "sim_s"),
+            num(v, "wall_s"),
+            num(v, "speed_factor")
+        );
+    }
     if let Some(live) = v.get("live").filter(|l| !l.is_null()) {
         s += &format!(
             "live view   ws://{}  {} messages sent, {} dropped\n",
@@ -122,6 +127,7 @@ pub fn status_line(code: i32, ending: &crate::supervise::Ending, plant_summary: 
         Ending::Completed => format!("rig: exit {code}: {}", found.join(", ")),
         Ending::PlantFailed(why) => format!("rig: exit {code}: plant failed: {why}{also}"),
         Ending::ControllerFailed(why) => format!("rig: exit {code}: controller failed: {why}{also}"),
+        Ending::NeverConnected(why) => format!("rig: exit {code}: controller never connected: {why}{also}"),
         Ending::Interrupted => format!("rig: exit {code}: interrupted (SIGINT), both daemons stopped{also}"),
         Ending::Terminated => format!("rig: exit {code}: terminated (SIGTERM), both daemons stopped{also}"),
     }

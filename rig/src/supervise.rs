@@ -35,6 +35,9 @@ pub struct RigLaunch {
     /// `--controller none` (EGM scenarios): start no controller, the plant waits for an external
     /// EGM client at the scenario's sensor address.
     pub no_controller: bool,
+    /// The scenario's `loop.connect_timeout_s`: how long the controller process may take to
+    /// answer its first state before it is named and the run ends (exit 3).
+    pub connect_timeout: Duration,
 }
 
 /// How a supervised run ended.
@@ -51,6 +54,9 @@ pub enum Ending {
     /// The controller exited while the plant still ran; the plant was told (safe stop), then
     /// stopped cleanly.
     ControllerFailed(String),
+    /// The controller process was alive but answered no state within the connect timeout: the
+    /// sentence (which program, what was seen, the likely fix) was said at once; both stopped.
+    NeverConnected(String),
 }
 
 impl Ending {
@@ -60,7 +66,7 @@ impl Ending {
         match self {
             Ending::Completed => 0,
             Ending::PlantFailed(_) => 2,
-            Ending::ControllerFailed(_) => 3,
+            Ending::ControllerFailed(_) | Ending::NeverConnected(_) => 3,
             Ending::Interrupted => 130,
             Ending::Terminated => 143,
         }
@@ -94,18 +100,24 @@ fn catches_signal(pid: u32, sig: i32) -> bool {
 /// Not before the plant has installed its handler (a SIGUSR1 would kill it): a plant still starting
 /// up has no loop to safe-stop. Returns whether the plant was told.
 fn report_controller_end(plant: &Child, status: ExitStatus) -> bool {
-    use plant_sim::rt::{encode_controller_end, ControllerEnd};
+    use plant_sim::rt::ControllerEnd;
     use std::os::unix::process::ExitStatusExt;
     let end = match (status.code(), status.signal()) {
         (Some(c), _) => ControllerEnd::Exit(c),
         (None, Some(s)) => ControllerEnd::Signal(s),
         _ => ControllerEnd::Unknown,
     };
+    send_controller_end(plant, end)
+}
+
+/// Queue `end` to the plant (SIGUSR1 with [`plant_sim::rt::encode_controller_end`]'s value), once
+/// its handler is installed. Also how rig reports a controller that never connected.
+fn send_controller_end(plant: &Child, end: plant_sim::rt::ControllerEnd) -> bool {
     let Some(pid) = plant.id() else { return false };
     if !catches_signal(pid, libc::SIGUSR1) {
         return false;
     }
-    let value = libc::sigval { sival_ptr: encode_controller_end(end) as isize as usize as *mut libc::c_void };
+    let value = libc::sigval { sival_ptr: plant_sim::rt::encode_controller_end(end) as isize as usize as *mut libc::c_void };
     // SAFETY: queueing a signal to our own child, which is not reaped yet (its pid is ours).
     if unsafe { libc::sigqueue(pid as i32, libc::SIGUSR1, value) } != 0 {
         tracing::warn!("could not tell plant-sim that the controller ended: {}", std::io::Error::last_os_error());
@@ -216,6 +228,16 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     if l.no_controller {
         return finish(plant_alone(&mut plant).await?, reader, false, false).await;
     }
+    // Watch for the controller's first answer from before it starts (its earliest torque counts).
+    let controller_pid = std::sync::Arc::new(std::sync::atomic::AtomicU32::new(0));
+    let connect_watch = match messages::connect::ConnectWatch::spawn(&l.rig, controller_pid.clone(), l.connect_timeout) {
+        Ok(w) => Some(w),
+        Err(e) => {
+            // The daemons report an unusable host themselves (exit 71); rig only loses this check.
+            tracing::debug!("no connect watch: {e}");
+            None
+        }
+    };
     let mut ctrl_cmd = Command::new(&l.controller_bin);
     ctrl_cmd.arg("--rig").arg(&l.rig).arg("--scenario").arg(&l.scenario).stdout(Stdio::inherit()).stderr(Stdio::inherit());
     if quiet {
@@ -237,6 +259,19 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             return Err(e);
         }
     };
+
+    controller_pid.store(controller.id().unwrap_or(0), std::sync::atomic::Ordering::Release);
+    // Resolves only if the controller never connected (else it stays pending).
+    let never_connected = async move {
+        match connect_watch {
+            Some(w) => match tokio::task::spawn_blocking(move || w.verdict()).await {
+                Ok(Some(seen)) => seen,
+                _ => std::future::pending().await,
+            },
+            None => std::future::pending().await,
+        }
+    };
+    tokio::pin!(never_connected);
 
     let mut sigint = signal(SignalKind::interrupt())?;
     let mut sigterm = signal(SignalKind::terminate())?;
@@ -292,6 +327,21 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
                     describe_stopped(p)
                 ))
             }
+        }
+        seen = &mut never_connected => {
+            let pid = controller.id().unwrap_or(0);
+            let sentence = format!(
+                "the controller {} (pid {pid}) is running but answered no state within {:.1} s (loop.connect_timeout_s): {}",
+                l.controller_bin.display(),
+                l.connect_timeout.as_secs_f64(),
+                seen.explain(&l.rig)
+            );
+            // Said at once; then the plant records it (/events) and both are stopped.
+            eprintln!("rig: CONTROLLER NEVER CONNECTED: {sentence}");
+            send_controller_end(&plant, plant_sim::rt::ControllerEnd::NeverConnected { pid, seen: seen.code() });
+            let _ = tokio::time::timeout(CONTROLLER_END_GRACE, plant.wait()).await;
+            let (_, _) = tokio::join!(stop(&mut plant, Duration::from_secs(10)), stop(&mut controller, Duration::from_secs(1)));
+            Ending::NeverConnected(sentence)
         }
         _ = sigint.recv() => {
             stop(&mut plant, Duration::from_secs(10)).await;

@@ -174,7 +174,7 @@ pub static FIELDS: &[Field] = &[
     num("loop.period_s", "s", range(lo_ex(0.0), hi_in(0.1)), "Control period."),
     num("loop.torque_budget_us", "µs", range(lo_ex(0.0), of(1e6, "loop.period_s", false)), "Real-time mode: how long after publishing the state the plant waits for the torque."),
     int("loop.max_consecutive_misses", "ticks", range(lo_in(1.0), hi_in(1000.0)), "Consecutive misses that trigger the safe stop (libfranka stops after 20)."),
-    num("loop.lockstep_watchdog_s", "s", range(lo_ex(0.0), hi_in(3600.0)), "Lockstep mode: how long the plant waits for one torque before declaring the controller dead."),
+    num("loop.lockstep_watchdog_s", "s", range(lo_ex(0.0), hi_in(3600.0)), "Lockstep mode: how long the plant waits for one torque before declaring the controller dead; not for the first answer: tick 0 is republished until a controller answers (`loop.connect_timeout_s` covers one that never does)."),
     with_rule(
         num("loop.duration_s", "s", NON_NEGATIVE, "Run length (`rig run --duration` overrides it); 0 = until the trajectory ends plus 0.2 s."),
         "0 or at least loop.period_s",
@@ -189,6 +189,7 @@ pub static FIELDS: &[Field] = &[
     num("loop.takeover_blend_s", "s", NON_NEGATIVE, "How long the torque is blended from the held value to a new controller's value (0 = at once)."),
     int("loop.takeover_after_misses", "ticks", range(lo_in(1.0), hi_in(1000.0)), "Consecutive missed ticks of the active controller after which another controller that is publishing may take over."),
     num("loop.peer_stall_timeout_s", "s", range(lo_ex(0.0), hi_in(3600.0)), "How long a peer that is alive but silent is waited for before it is treated as dead (a stalled host or SIGSTOP is not a death)."),
+    num("loop.connect_timeout_s", "s", range(lo_ex(0.0), hi_in(3600.0)), "How long `rig` waits, from the plant's first state, for the controller process it started to answer one (lockstep: tick 0); a controller alive but silent that long is named with what `rig` saw of it (no iceoryx2 node of the rig, a node but no torque publisher, torques of another contract version), both daemons are stopped and `rig` exits 3."),
     num("loop.spin_wait_us", "µs", range(lo_in(0.0), of(1.0, "loop.torque_budget_us", true)), "Real-time mode: the plant busy-polls for the torque this long after publishing before it sleeps on the event (0 = never spin)."),
     num("loop.controller_spin_us", "µs", range(lo_in(0.0), of(0.5e6, "loop.period_s", false)), "Real-time mode: the controller busy-polls from this long before the state is due until this long after (0 = always sleep on the event)."),
     flag("loop.idle_poll", "Real-time mode: hold the kernel's PM QoS CPU latency request at 0 while the plant runs (needs root; refused requests are logged)."),

@@ -258,6 +258,10 @@ pub struct LoopConfig {
     /// How long a peer that is alive (its iceoryx2 node is not dead) but silent is waited for
     /// before it is treated as dead, s (a stalled host or SIGSTOP is not a death).
     pub peer_stall_timeout_s: f64,
+    /// How long `rig` waits, from the plant's first state, for the controller process it started
+    /// to answer one (in lockstep: tick 0), s; a controller alive but silent that long is named, with what `rig`
+    /// saw of it, and the run ends with exit 3.
+    pub connect_timeout_s: f64,
     /// Real-time mode: the plant busy-polls for the torque this long after publishing before it
     /// sleeps on the event, µs (0 = never spin). Trades CPU for wake-up latency on VMs.
     pub spin_wait_us: f64,
@@ -286,6 +290,7 @@ impl Default for LoopConfig {
             takeover_blend_s: 0.05,
             takeover_after_misses: 3,
             peer_stall_timeout_s: 5.0,
+            connect_timeout_s: 5.0,
             spin_wait_us: 100.0,
             controller_spin_us: 100.0,
             idle_poll: true,

@@ -1,5 +1,10 @@
 //! `hold-controller --rig NAME --scenario FILE [--contract-version N] [--offset-nm X]
-//! [--answer-after-us MIN:MAX [--seed N]]`
+//! [--answer-after-us MIN:MAX [--seed N]] [--sleep-before-open-s S] [--open-rig OTHER] [--iceoryx2-defaults]`
+//!
+//! `--answer-after-us` answers late, as a slow controller would (the take-over test, issue 22).
+//! The last three make it a controller that never connects, as a user's port gone wrong would
+//! (rig's connect timeout, issue 27): it sleeps before opening anything, opens another rig's
+//! name, or creates its node with iceoryx2's default configuration instead of the rig's.
 //!
 //! A second, deliberately simple controller binary: joint-space computed torque
 //! `τ = M(q)(Kp e − Kd q̇) + C(q, q̇) q̇ + g(q)` (via RNEA) holding the joint position of the first
@@ -41,6 +46,32 @@ struct Args {
     /// Seed of the `--answer-after-us` delays.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Sleep this long before opening the rig (a slow start), s.
+    #[arg(long, default_value_t = 0.0)]
+    sleep_before_open_s: f64,
+    /// Open this rig name instead of --rig's.
+    #[arg(long)]
+    open_rig: Option<String>,
+    /// Create the node with iceoryx2's default configuration, not the rig's, and wait for states
+    /// that never come there.
+    #[arg(long)]
+    iceoryx2_defaults: bool,
+}
+
+/// A peer that skips the rig's iceoryx2 configuration: its node and the state service live in
+/// iceoryx2's default namespace, where no plant publishes; it waits there for good.
+fn defaults_only(rig: &str) -> anyhow::Result<()> {
+    use iceoryx2::prelude::*;
+    let node = NodeBuilder::new().create::<ipc::Service>()?;
+    let name: ServiceName = format!("rig/{rig}/joint_state").as_str().try_into()?;
+    let service = node.service_builder(&name).publish_subscribe::<messages::JointState>().open_or_create()?;
+    let sub = service.subscriber_builder().create()?;
+    loop {
+        if sub.receive()?.is_some() {
+            anyhow::bail!("a joint state arrived in iceoryx2's default namespace");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }
 
 /// `MIN:MAX` in µs, MIN <= MAX.
@@ -99,8 +130,12 @@ fn run(a: &Args) -> anyhow::Result<()> {
     let robot = robot::Robot::irb2400_with_tool(scenarios::geometry::tool(&s))
         .with_armature(Vec6::from(s.robot.armature_kgm2))
         .with_viscous(Vec6::from(s.robot.viscous_nms));
+    std::thread::sleep(Duration::from_secs_f64(a.sleep_before_open_s));
+    if a.iceoryx2_defaults {
+        return defaults_only(&a.rig);
+    }
     messages::ports::clean_dead_nodes();
-    let ports = ControllerPorts::open(&a.rig, "hold-controller")?;
+    let ports = ControllerPorts::open(a.open_rig.as_deref().unwrap_or(&a.rig), "hold-controller")?;
     let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
     let id = ((std::process::id() as u64) << 32) | nanos as u64;
     let mut hold: Option<Vec6> = None;
