@@ -68,3 +68,28 @@ pub fn load(path: &Path, reference: &StripParams, h_s: f64) -> Option<StripTable
     }
     StripTables::from_parts(reference.clone(), h_s, TableParts::from_vecs(vecs)?)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cached_tables_load_bit_for_bit_and_a_bad_file_is_rebuilt() {
+        let model = crate::contact::tests::coarse();
+        let h = 1e-4;
+        let built = StripTables::new(&model, h);
+        let dir = std::env::temp_dir().join(format!("table-cache-test-{}", std::process::id()));
+        let path = path(&dir, &model.params, h);
+        save(&built, &path).unwrap();
+        let loaded = load(&path, &model.params, h).expect("cached tables load");
+        let bits = |t: &StripTables| t.parts().vecs().iter().map(|v| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>()).collect::<Vec<_>>();
+        assert_eq!(bits(&loaded), bits(&built));
+        assert_eq!(loaded.params(), built.params());
+        // Another substep, a truncated file: no tables (the caller builds them).
+        assert!(load(&path, &model.params, 2e-4).is_none());
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 5]).unwrap();
+        assert!(load(&path, &model.params, h).is_none());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
