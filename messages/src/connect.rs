@@ -111,6 +111,13 @@ impl ConnectWatch {
         }
     }
 
+    /// A flag that ends the watch when set: the supervisor sets it when the run ends otherwise
+    /// (a plant that dies before its first state would leave the watch, and `rig`'s exit
+    /// waiting on it, running for good).
+    pub fn stop_flag(&self) -> Arc<AtomicBool> {
+        self.stop.clone()
+    }
+
     /// Block until the controller connected (None) or the timeout passed (what was seen).
     pub fn verdict(mut self) -> Option<NotConnected> {
         self.thread.take().and_then(|t| t.join().ok()).flatten()

@@ -422,7 +422,11 @@ fn a_40_kib_dev_shm_is_one_sentence_and_exit_71_not_sigbus() {
     if !namespaces_available("a_40_kib_dev_shm") {
         return;
     }
-    shm_fault("shm40k", "mount -t tmpfs -o size=40k,mode=1777 tmpfs /dev/shm", "/dev/shm has 40 KiB free, too little for a rig");
+    shm_fault(
+        "shm40k",
+        "mount -t tmpfs -o size=40k,mode=1777 tmpfs /dev/shm",
+        "KiB free, too little for a rig (it holds 76 KiB while it runs",
+    );
 }
 
 #[test]

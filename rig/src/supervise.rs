@@ -261,6 +261,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     };
 
     controller_pid.store(controller.id().unwrap_or(0), std::sync::atomic::Ordering::Release);
+    let watch_stop = connect_watch.as_ref().map(messages::connect::ConnectWatch::stop_flag);
     // Resolves only if the controller never connected (else it stays pending).
     let never_connected = async move {
         match connect_watch {
@@ -354,6 +355,11 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             Ending::Terminated
         }
     };
+    // However the run ended, the connect watch ends with it (its blocking task would hold up
+    // the runtime's shutdown, and rig's exit, for good).
+    if let Some(s) = watch_stop {
+        s.store(true, std::sync::atomic::Ordering::Release);
+    }
     finish(ending, reader, controller_exited_first, plant_told).await
 }
 
