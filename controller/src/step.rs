@@ -3,7 +3,7 @@
 //! torque and its diagnostics. The daemon (`daemon.rs`), `rig run --in-process`, `rig sweep` and
 //! the tests all drive this one type, so the same code answers over iceoryx2 and in-process.
 //!
-//! Allocation-free per call (`rig-tests/tests/no_alloc.rs` counts, over a whole servo run).
+//! Allocation-free per call (`tests/tests/no_alloc.rs` counts, over a whole servo run).
 
 use messages::{state_flags, ControllerDiagnostics, ControllerStatus, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame};
 use nalgebra::{Matrix3, Vector3};

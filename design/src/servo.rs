@@ -1,7 +1,7 @@
 //! In-process 6-DOF servo simulation: the plant's tick ([`plant_sim::PlantTick`]: physics,
 //! torque gate, limits) and the controller's step ([`controller::Controller::process`]) in one
 //! thread, no IPC. The same two values the daemons drive, so a servo run equals the lockstep run
-//! of its scenario tick for tick (rig-tests/tests/tick_identity.rs proves that of `rig run
+//! of its scenario tick for tick (tests/tests/tick_identity.rs proves that of `rig run
 //! --in-process`, which drives them the same way) and tracking studies (robustness table,
 //! substep convergence) run in seconds.
 

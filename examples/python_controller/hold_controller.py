@@ -9,7 +9,7 @@ Speaks the wire contract of messages/README.md over iceoryx2 shared memory (PyPI
     tau = M(q) (Kp e - Kd qd) + C(q, qd) qd + g(q) + armature * qdd_ref + viscous * qd
 
 (Pinocchio RNEA), so every joint behaves as a critically damped 10 Hz unit mass, exactly like
-rig-tests/src/bin/hold_controller.rs. Exits 0 when the plant says it is shutting down, 1 on a
+tests/src/bin/hold_controller.rs. Exits 0 when the plant says it is shutting down, 1 on a
 contract-version mismatch or when the plant falls silent. Needs `pip install iceoryx2==0.10.0
 pin numpy`.
 """

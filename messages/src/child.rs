@@ -1,5 +1,5 @@
 //! Child processes of the rig's launchers, written once: `rig` (crate `rig`, through tokio), `rig
-//! replay` (`recording-tools`) and the end-to-end tests' harness (`rig-tests`) spawn, wait for,
+//! replay` (`recording-tools`) and the end-to-end tests' harness (`tests`) spawn, wait for,
 //! stop and describe their daemons with these.
 //!
 //! - [`configure`]: stdin from /dev/null, optionally an own process group and

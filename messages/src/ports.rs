@@ -198,7 +198,7 @@ fn poll_once(fd: i32, d: Duration) -> bool {
 /// has not landed yet (that drain finds the state "pending" and sets it idle, so the late mark's
 /// compare-exchange fails): the eaten datagram's activation is always counted by the drain that
 /// ate it. Looking for the data after the drains keeps an answer whose notification they
-/// consumed from being slept through. The minimal program: `rig-tests/src/bin/iox2_lost_wakeup.rs`.
+/// consumed from being slept through. The minimal program: `tests/src/bin/iox2_lost_wakeup.rs`.
 fn drain_then_wait(listener: &Listener, fd: i32, deadline: Instant, pending: impl Fn() -> bool) -> Wake {
     // Bounded: a peer notifying without pause must not keep us here (the caller's slice is the
     // backstop then).

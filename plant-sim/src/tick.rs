@@ -6,7 +6,7 @@
 //! `rig run --in-process` and `rig sweep` drive this one type: the loops add only pacing, ports
 //! and the recorder hand-off.
 //!
-//! Per tick: no allocation (`rig-tests/tests/no_alloc.rs` counts), no lock; rare events (miss streak, safe stop, reflex, end stop,
+//! Per tick: no allocation (`tests/tests/no_alloc.rs` counts), no lock; rare events (miss streak, safe stop, reflex, end stop,
 //! refusal, controller change) go to the recorder's wait-free queue and, rate-limited, the log.
 
 use std::fmt::Write as _;

@@ -3,7 +3,7 @@
 //! into a changed one (a known 0.5 N m offset on joint 1); a SIGKILLed and a SIGINTed plant leave
 //! readable files.
 //!
-//! Needs the binaries in the target folder (`cargo build --release -p plant-sim -p rig-tests`);
+//! Needs the binaries in the target folder (`cargo build --release -p plant-sim -p tests`);
 //! skips with a `SKIP:` line when they are missing.
 
 use recording_tools::cli::ReplayArgs;
@@ -23,7 +23,7 @@ fn binaries() -> Option<(PathBuf, PathBuf)> {
     if plant.is_file() && hold.is_file() {
         Some((plant, hold))
     } else {
-        println!("SKIP: {} or {} not built (cargo build --release -p plant-sim -p rig-tests)", plant.display(), hold.display());
+        println!("SKIP: {} or {} not built (cargo build --release -p plant-sim -p tests)", plant.display(), hold.display());
         None
     }
 }

@@ -1,5 +1,5 @@
 // Reads a rig recording with Foxglove's own libraries and checks what Foxglove shows
-// (recordings/README.md, "Foxglove"). Driven by `rig-tests/tests/foxglove.rs`, which makes the
+// (recordings/README.md, "Foxglove"). Driven by `tests/tests/foxglove.rs`, which makes the
 // recording and the expectations from the robot crate:
 //
 //   tsx check_foxglove.ts RUN.mcap EXPECT.json

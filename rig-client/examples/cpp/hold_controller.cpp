@@ -5,7 +5,7 @@
 //
 // tau = M(q) (Kp e - Kd qd) + C(q, qd) qd + g(q) by inverse dynamics (the rig's model, tool
 // included), holding the first state's q; every joint a critically damped 10 Hz unit mass. The
-// same arithmetic as rig-tests/src/bin/hold_controller.rs, so in lockstep both send the same torques.
+// same arithmetic as tests/src/bin/hold_controller.rs, so in lockstep both send the same torques.
 // Exits 0 on the plant's goodbye, 1 with one sentence when the plant is gone or silent.
 #include <cstdio>
 #include <cstring>

@@ -1,0 +1,103 @@
+//! `rig run --mode lockstep --in-process` and the cases of `rig sweep`: the plant's tick
+//! ([`plant_sim::PlantTick`]) and the controller's step ([`controller::Controller`]) in one
+//! thread, no daemons, no iceoryx2, recorded through the same writer as the plant's. Transport is
+//! transparent: every state, wrench and torque is bit-identical to the daemons' lockstep run of
+//! the same scenario (tests/tests/tick_identity.rs, sweep.rs).
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Context;
+use plant_sim::physics::Physics;
+use plant_sim::recording::{EventKind, EventRecord};
+use plant_sim::run::{nominal_duration_s, open_recorder_with, RecordingAbout, RunSummary};
+use plant_sim::stats::LoopStats;
+use plant_sim::PlantTick;
+use recordings::TimingRecord;
+use scenarios::{Mode, Scenario};
+
+/// `controller_id` of the in-process controller (no process to name it after).
+const IN_PROCESS_CONTROLLER_ID: u64 = 1;
+
+/// zstd level of a sweep case's recording: level 1 takes about 13 % less CPU for the whole sweep
+/// than zstd's default 3, for files about 10 % larger (20 default-scenario cases, 2026-12-02);
+/// the writer competes with the cases for the cores there.
+pub const SWEEP_COMPRESSION_LEVEL: u32 = 1;
+
+/// One in-process run of the scenario at `scenario_path` for `duration_s` (None: the scenario's,
+/// or its nominal trajectory), recorded to `recording` when the scenario records, with the
+/// writer's `tuning`. `physics` builds the plant (a sweep shares the strip tables across its
+/// cases). Returns the plant's summary, the JSON `plant-sim` prints.
+pub fn run(
+    rig: &str,
+    scenario_path: &Path,
+    duration_s: Option<f64>,
+    recording: &Path,
+    tuning: recordings::RecorderTuning,
+    physics: impl FnOnce(&Scenario) -> anyhow::Result<Physics>,
+) -> anyhow::Result<serde_json::Value> {
+    let s = Scenario::load(scenario_path)?;
+    anyhow::ensure!(!s.egm.enabled, "--in-process: {} enables [egm]; the EGM path runs with its daemons only", scenario_path.display());
+    let text = std::fs::read_to_string(scenario_path).with_context(|| format!("reading {}", scenario_path.display()))?;
+    let l = &s.loop_;
+    let duration_s = duration_s.or((l.duration_s > 0.0).then_some(l.duration_s)).unwrap_or_else(|| nominal_duration_s(&s));
+    let n_ticks = (duration_s / l.period_s).round() as u64;
+    let physics = physics(&s)?;
+    let path = s.recording.enabled.then(|| recording.to_path_buf());
+    let mut recorder = match &path {
+        Some(p) => {
+            let about = RecordingAbout { rig, mode: Mode::Lockstep, scenario_path, scenario_text: text, transport: Some("in-process") };
+            Some(open_recorder_with(p, &about, &s, &physics, None, tuning)?)
+        }
+        None => None,
+    };
+    let mut plant = PlantTick::new(&s, physics, Mode::Lockstep);
+    let mut controller = controller::Controller::from_scenario(&s).with_id(IN_PROCESS_CONTROLLER_ID);
+    if let Some(r) = recorder.as_mut() {
+        let text = format!("plant started: rig {rig}, mode Lockstep (in-process), {n_ticks} ticks");
+        r.record_event(&EventRecord::new(0, 0.0, EventKind::Start, &text));
+    }
+    let started = Instant::now();
+    let mut stats = LoopStats::empty();
+    while plant.tick() < n_ticks {
+        if plant_sim::rt::stop_requested() {
+            stats.stopped_by_signal = true;
+            break;
+        }
+        let (state, wrench) = plant.outputs();
+        let (torque, diag) = controller.process(&state, &wrench);
+        let outcome = plant.advance(Some(&torque), recorder.as_mut());
+        if let Some(r) = recorder.as_mut() {
+            let timing = TimingRecord { missed: outcome.decision.missed, ..TimingRecord::default() };
+            r.record_tick_commanded(&plant_sim::tick::tick_record(state, wrench, &outcome, Some(diag), timing), Some(&torque));
+        }
+    }
+    let tick = plant.tick();
+    stats.ticks = tick;
+    stats.count_plant(&plant);
+    stats.wall_s = started.elapsed().as_secs_f64();
+    (stats.active_wall_s, stats.active_sim_s) = (stats.wall_s, stats.sim_s);
+    let drops = recorder.as_ref().map_or(0, |r| r.dropped());
+    let recording_stopped_early = match recorder {
+        Some(mut r) => {
+            let why = if stats.stopped_by_signal { "signal" } else { "duration reached" };
+            r.record_event(&EventRecord::new(tick, stats.sim_s, EventKind::Stop, &format!("plant stopped after {tick} ticks ({why})")));
+            r.finish().context("finishing the recording")?.stopped_early
+        }
+        None => None,
+    };
+    let summary = RunSummary {
+        stats,
+        recording: path.clone(),
+        drops,
+        recording_stopped_early,
+        mode: Mode::Lockstep,
+        rt: plant_sim::rt::RtSetup::default(),
+        live: None,
+        probe: None,
+        egm: None,
+    };
+    let mut v = summary.to_json(rig);
+    v["transport"] = "in-process".into();
+    Ok(v)
+}

@@ -1,0 +1,128 @@
+//! The 1 kHz path allocates nothing (DESIGN section 6): a counting global allocator over the
+//! default scenario's whole servo run in one thread, the plant's tick ([`PlantTick::outputs`] +
+//! [`PlantTick::advance`]) and the controller's step ([`Controller::process`]) counted apart,
+//! after a warm-up; and the same with the recorder hand-off of every tick and event. This file
+//! is its own test binary, so the counting allocator is the global one of nothing else.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use controller::Controller;
+use messages::state_flags;
+use plant_sim::physics::Physics;
+use plant_sim::recording::TimingRecord;
+use plant_sim::run::{open_recorder, RecordingAbout};
+use plant_sim::PlantTick;
+use scenarios::{Mode, Scenario};
+
+struct Counting;
+
+thread_local! {
+    /// Allocations made by this thread only, so the test harness's own threads cannot interfere.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(Cell::get)
+}
+
+fn count() {
+    ALLOCATIONS.with(|n| n.set(n.get() + 1));
+}
+
+// SAFETY: every method forwards to System, which upholds the GlobalAlloc contract.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwards the caller's GlobalAlloc contract to the system allocator.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Ticks before counting starts: the first connection's event text, lazily initialised statics.
+const WARM_UP_TICKS: u64 = 50;
+
+#[test]
+fn plant_tick_and_controller_step_do_not_allocate_over_a_whole_servo_run() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/default.toml");
+    let s = Scenario::load(&path).unwrap();
+    let mut plant = PlantTick::from_scenario(&s, &strip::cache::cache_dir(), Mode::Lockstep).unwrap();
+    let mut controller = Controller::from_scenario(&s).with_id(1);
+    let n_ticks = (plant_sim::run::nominal_duration_s(&s) / s.loop_.period_s).round() as u64;
+    let (mut plant_allocations, mut controller_allocations) = (0, 0);
+    let (mut counted, mut in_contact) = (0, 0);
+    while plant.tick() < n_ticks {
+        let a0 = allocations();
+        let (state, wrench) = plant.outputs();
+        let a1 = allocations();
+        let (torque, diag) = controller.process(&state, &wrench);
+        let a2 = allocations();
+        let outcome = plant.advance(Some(&torque), None);
+        let a3 = allocations();
+        std::hint::black_box((&diag, &outcome));
+        if state.tick >= WARM_UP_TICKS {
+            plant_allocations += (a1 - a0) + (a3 - a2);
+            controller_allocations += a2 - a1;
+            counted += 1;
+            in_contact += u64::from(state.flags & state_flags::IN_CONTACT != 0);
+        }
+    }
+    // The counted ticks are the run: approach, contact, roll over the bulge, lift-off.
+    assert!(counted >= 2000, "{counted} ticks counted");
+    assert!(in_contact >= 1000 && in_contact < counted, "{in_contact} of {counted} counted ticks in contact");
+    assert_eq!(plant.first_ticks().safe_stop, None, "the servo run as the scenario describes it");
+    // The counter works: a Vec does allocate.
+    let probe = allocations();
+    std::hint::black_box(vec![1u8; 16]);
+    assert_eq!(allocations(), probe + 1);
+    assert_eq!(plant_allocations, 0, "{plant_allocations} heap allocations in PlantTick::outputs/advance over {counted} ticks");
+    assert_eq!(controller_allocations, 0, "{controller_allocations} heap allocations in Controller::process over {counted} ticks");
+}
+
+#[test]
+fn handing_every_tick_to_the_recorder_does_not_allocate() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/default.toml");
+    let s = Scenario::load(&path).unwrap();
+    let physics = Physics::new(&s, &strip::cache::cache_dir()).unwrap();
+    let dir = harness::temp_dir(&harness::unique_rig("no-alloc"));
+    let about =
+        RecordingAbout { rig: "no-alloc", mode: Mode::Lockstep, scenario_path: &path, scenario_text: String::new(), transport: None };
+    let mut recorder = open_recorder(&dir.join("run.mcap"), &about, &s, &physics, None).unwrap();
+    let mut plant = PlantTick::new(&s, physics, Mode::Lockstep);
+    let mut controller = Controller::from_scenario(&s).with_id(1);
+    let n_ticks = 2500;
+    let (mut allocated, mut counted) = (0, 0);
+    while plant.tick() < n_ticks {
+        let a0 = allocations();
+        let (state, wrench) = plant.outputs();
+        let (torque, diag) = controller.process(&state, &wrench);
+        let outcome = plant.advance(Some(&torque), Some(&mut recorder));
+        let timing = TimingRecord { missed: outcome.decision.missed, ..TimingRecord::default() };
+        recorder.record_tick_commanded(&plant_sim::tick::tick_record(state, wrench, &outcome, Some(diag), timing), Some(&torque));
+        if state.tick >= WARM_UP_TICKS {
+            allocated += allocations() - a0;
+            counted += 1;
+        }
+    }
+    let dropped = recorder.dropped();
+    recorder.finish().unwrap();
+    assert_eq!(dropped, 0, "the writer kept up, so every tick went through the queue");
+    assert_eq!(allocated, 0, "{allocated} heap allocations in the tick plus recorder hand-off over {counted} ticks");
+}
