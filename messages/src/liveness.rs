@@ -152,17 +152,51 @@ fn publisher_of_node<T: core::fmt::Debug + ZeroCopySend + Copy>(f: &Factory<T>, 
     id
 }
 
-/// Is node `node` alive? Dead, vanished or undefined nodes are not.
-fn node_alive(config: &Config, node: u128) -> bool {
-    let mut alive = false;
-    let _ = Node::<ipc::Service>::list(config, |state| {
-        if state.node_id().value() == node {
-            alive = matches!(state, NodeState::Alive(_) | NodeState::Inaccessible(_));
-            return CallbackProgression::Stop;
+/// The monitoring concept of iceoryx2's IPC service (a file lock per node).
+type Monitor = <ipc::Service as iceoryx2::service::Service>::Monitoring;
+
+/// iceoryx2's own monitor of ONE node: the same dead-node detection as `Node::list`, without its
+/// cost. `Node::list` reads and parses every node's details file and Debug-formats the whole
+/// configuration once per node on every call (iceoryx2 0.10, node/mod.rs `get_node_details`):
+/// 1-2 ms of CPU per scan with the rig's half-dozen nodes, every [`WATCH_PERIOD`], in both
+/// daemons: on two cores that preempted the 1 kHz threads (issue 22). This asks the one node's
+/// monitor (a stat, an open, a read, a lock test).
+struct NodeMonitor {
+    node: u128,
+    monitor: Option<<Monitor as Monitoring>::Monitor>,
+}
+
+use iceoryx2::prelude::FileName;
+use iceoryx2_cal::monitoring::{Monitoring, MonitoringBuilder, MonitoringMonitor, MonitoringStateError, State};
+use iceoryx2_cal::named_concept::{NamedConceptBuilder, NamedConceptConfiguration, NamedConceptMgmt};
+
+impl NodeMonitor {
+    fn open(config: &Config, node: u128) -> NodeMonitor {
+        // The configuration iceoryx2 builds for its node monitors (service/config_scheme.rs
+        // `node_monitoring_config`); the monitor's name is the node id in decimal (as `Node::list`
+        // parses it back).
+        let cfg = <<Monitor as NamedConceptMgmt>::Configuration>::default()
+            .prefix(&config.global.prefix)
+            .suffix(&config.global.node.monitor_suffix)
+            .path_hint(&config.global.node_dir());
+        let monitor = FileName::new(node.to_string().as_bytes())
+            .ok()
+            .and_then(|name| <Monitor as Monitoring>::Builder::new(&name).config(&cfg).monitor().ok());
+        NodeMonitor { node, monitor }
+    }
+
+    /// Is the node alive? Dead, vanished or undefined nodes are not (as in `Node::list`); one
+    /// whose monitor cannot be read for lack of permission counts as alive (`Inaccessible`), and
+    /// so does one whose check a signal interrupted: the next period asks again.
+    fn alive(&self) -> bool {
+        let Some(m) = &self.monitor else { return false };
+        match m.state() {
+            Ok(State::Alive) => true,
+            Ok(State::Dead | State::DoesNotExist) => false,
+            Err(MonitoringStateError::InsufficientPermissions | MonitoringStateError::Interrupt) => true,
+            Err(MonitoringStateError::InternalError) => false,
         }
-        CallbackProgression::Continue
-    });
-    alive
+    }
 }
 
 fn watch_thread(rig: &str, role: &str, watched: Watched, sh: &Shared, ready: &std::sync::mpsc::Sender<Result<(), PortError>>) {
@@ -188,6 +222,7 @@ fn watch_thread(rig: &str, role: &str, watched: Watched, sh: &Shared, ready: &st
         }
     };
     let mut known: (u128, u128) = (0, 0); // (followed publisher, its node)
+    let mut monitor: Option<NodeMonitor> = None;
     while !sh.stop.load(Ordering::Acquire) {
         std::thread::sleep(WATCH_PERIOD);
         let followed = sh.followed.load();
@@ -211,7 +246,10 @@ fn watch_thread(rig: &str, role: &str, watched: Watched, sh: &Shared, ready: &st
                         None => known = (followed, n),
                     }
                 }
-                !node_alive(node.config(), n)
+                if monitor.as_ref().is_none_or(|m| m.node != n) {
+                    monitor = Some(NodeMonitor::open(node.config(), n));
+                }
+                !monitor.as_ref().is_some_and(NodeMonitor::alive)
             }
             None => true,
         };

@@ -20,6 +20,20 @@ impl Launcher {
         unsafe { libc::getppid() != self.pid }
     }
 
+    /// [`gone`](Self::gone), waiting up to `grace` for it. PR_SET_PDEATHSIG fires when the
+    /// *thread* that started the plant ends; when a launcher is killed, its other threads may
+    /// still be on their way out, and until the last one is, the parent is still its PID.
+    pub fn gone_within(&self, grace: std::time::Duration) -> bool {
+        let until = std::time::Instant::now() + grace;
+        while !self.gone() {
+            if std::time::Instant::now() >= until {
+                return false;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        true
+    }
+
     /// The `/events` text for a plant that its launcher's death stopped.
     pub fn death_note(&self) -> String {
         format!("the launcher (PID {}) ended without stopping the plant; the plant stopped on its parent-death SIGTERM", self.pid)

@@ -191,6 +191,10 @@ pub fn open_recorder_with(
     Recorder::start_with(cfg, tuning).with_context(|| format!("starting the recorder on {}", path.display()))
 }
 
+/// How long a plant stopped by a signal waits for its launcher's last thread to end before it
+/// decides the launcher lives on (a stop `rig` asked for pays it once, at the end).
+const LAUNCHER_EXIT_GRACE: std::time::Duration = std::time::Duration::from_millis(200);
+
 /// Run the plant until the duration is reached or SIGINT/SIGTERM arrives.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let t_run = std::time::Instant::now();
@@ -354,7 +358,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     if let (Some(r), Some(cpus)) = (recorder.as_mut(), probe.as_ref()) {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Info, &crate::probe::summary_text(cpus)));
     }
-    if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone()) {
+    if let Some(r) = recorder.as_mut().filter(|_| stats.stopped_by_signal && launcher.gone_within(LAUNCHER_EXIT_GRACE)) {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Fault, &launcher.death_note()));
     }
     let t_end = std::time::Instant::now();
