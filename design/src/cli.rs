@@ -18,7 +18,7 @@ use scenarios::geometry::{self, TaskFrame};
 use scenarios::Scenario;
 use strip::StripModel;
 
-use crate::freq::{log_grid, margins, unwrap_deg, Margins};
+use crate::freq::{log_grid, unwrap_deg, Margins};
 use crate::plant1::{Loop1, StripPoint};
 use crate::servo::{tracking, Tracking};
 
@@ -55,7 +55,11 @@ pub struct DesignResult {
     pub effective_mass_kg: f64,
     pub loop1: Loop1,
     pub predicted_phase_margin_deg: f64,
+    /// The loop's margins with the scenario's force measurement chain (`[sensor]`'s low-pass and
+    /// delay, the controller's force filter: `loop1`'s `sensor_*`, `force_filter_beta`).
     pub margins: Option<Margins>,
+    /// The same loop with an ideal sensor (equal to `margins` without `[sensor]` and a filter).
+    pub margins_ideal_sensor: Option<Margins>,
     pub servo_1dof_max_error_n: f64,
     pub servo_1dof_rms_error_n: f64,
     pub figures: Vec<PathBuf>,
@@ -86,14 +90,13 @@ pub fn analyse(
         b_d_nspm: gains.force.b_d_nspm,
         k_i_per_s: gains.force.k_i_per_s,
         period_s: s.loop_.period_s,
-    };
+        sensor_alpha: 1.0,
+        sensor_delay_ticks: 0,
+        force_filter_beta: 1.0,
+    }
+    .with_measurement_of(s);
     let f = log_grid(0.5, 5000.0, 1200);
-    let resp: Vec<_> = f.iter().map(|&f| lp.response(&strip, f)).collect();
-    let mag: Vec<f64> = resp.iter().map(|r| r.loop_gain.norm()).collect();
-    let mut ph_h: Vec<f64> = resp.iter().map(|r| r.loop_phase_parts_deg.0).collect();
-    unwrap_deg(&mut ph_h);
-    let ph: Vec<f64> = ph_h.iter().zip(&resp).map(|(a, r)| a + r.loop_phase_parts_deg.1).collect();
-    let m = margins(&f, &mag, &ph);
+    let (resp, m) = lp.sweep(&strip, &f);
     (lp, strip, f, resp, m)
 }
 
@@ -221,6 +224,7 @@ pub fn design(s: &Scenario, model: &StripModel, z_a_m: f64, out: &Path) -> anyho
         loop1: lp,
         predicted_phase_margin_deg: gains.force.predicted_phase_margin_deg,
         margins: m,
+        margins_ideal_sensor: lp.ideal_sensor().sweep(&strip, &f).1,
         servo_1dof_max_error_n: tr.max_n,
         servo_1dof_rms_error_n: tr.rms_n,
         figures,
@@ -232,12 +236,26 @@ pub fn design(s: &Scenario, model: &StripModel, z_a_m: f64, out: &Path) -> anyho
 
 /// Human-readable summary.
 pub fn summary_text(r: &DesignResult) -> String {
-    let m = r.margins.map_or("no crossover".to_string(), |m| {
-        format!(
-            "crossover {:.1} Hz, phase margin {:.1} deg, |S| peak {:.2} dB at {:.1} Hz",
-            m.crossover_hz, m.phase_margin_deg, m.sensitivity_peak_db, m.sensitivity_peak_hz
-        )
-    });
+    let text = |m: Option<Margins>| {
+        m.map_or("no crossover".to_string(), |m| {
+            format!(
+                "crossover {:.1} Hz, phase margin {:.1} deg, |S| peak {:.2} dB at {:.1} Hz",
+                m.crossover_hz, m.phase_margin_deg, m.sensitivity_peak_db, m.sensitivity_peak_hz
+            )
+        })
+    };
+    let mut m = text(r.margins);
+    let l = &r.loop1;
+    if l.sensor_alpha != 1.0 || l.sensor_delay_ticks != 0 || l.force_filter_beta != 1.0 {
+        m = format!(
+            "{m}\n      with the force measurement (sensor low-pass alpha {:.4}, delay {} ticks, controller filter beta {:.4}); \
+             with an ideal sensor: {}",
+            l.sensor_alpha,
+            l.sensor_delay_ticks,
+            l.force_filter_beta,
+            text(r.margins_ideal_sensor)
+        );
+    }
     format!(
         "strip under the wheel at z_a = {:.1} mm: k_s = {:.4e} N/m (with contact penalty {:.4e} N/m); controller uses {:.4e} N/m\n\
          effective mass {:.2} kg; m_d = {:.4} kg, b_d = {:.2} N s/m, k_i = {:.2} 1/s (rule predicts PM {:.1} deg)\n\

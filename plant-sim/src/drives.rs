@@ -34,6 +34,10 @@ pub struct Friction {
     stiffness: [f64; 6],
     damping: [f64; 6],
     anchor: [f64; 6],
+    /// A lower bound of the Stribeck curve (the Coulomb level when breakaway ≥ Coulomb, else 0):
+    /// a spring torque within it is below the friction level whatever the speed, so neither the
+    /// clamp nor the slip needs the curve's exp() (the same result, bit for bit, cheaper).
+    floor: [f64; 6],
     /// 1 + torque-constant error.
     gain: [f64; 6],
 }
@@ -49,6 +53,7 @@ impl Friction {
             stiffness: limits.stop_stiffness_nm_per_rad,
             damping: limits.stop_damping_nms_per_rad,
             anchor: std::array::from_fn(|i| q[i]),
+            floor: std::array::from_fn(|i| if cfg.breakaway_nm[i] >= cfg.coulomb_nm[i] { cfg.coulomb_nm[i].max(0.0) } else { 0.0 }),
             gain: std::array::from_fn(|i| 1.0 + cfg.torque_constant_error[i]),
         }
     }
@@ -72,9 +77,15 @@ impl Friction {
     #[inline]
     pub fn torque(&self, q: &Vec6, qd: &Vec6) -> Vec6 {
         Vec6::from_fn(|i, _| {
-            let f = self.level(i, qd[i]);
             let p = -self.stiffness[i] * (q[i] - self.anchor[i]);
-            (p - self.damping[i] * qd[i]).clamp(-f, f) - self.viscous[i] * qd[i]
+            let x = p - self.damping[i] * qd[i];
+            let stick = if x.abs() <= self.floor[i] {
+                x
+            } else {
+                let f = self.level(i, qd[i]);
+                x.clamp(-f, f)
+            };
+            stick - self.viscous[i] * qd[i]
         })
     }
 
@@ -82,8 +93,11 @@ impl Friction {
     /// follows the joint.
     pub fn slip(&mut self, q: &Vec6, qd: &Vec6) {
         for i in 0..6 {
-            let f = self.level(i, qd[i]);
             let p = -self.stiffness[i] * (q[i] - self.anchor[i]);
+            if p.abs() <= self.floor[i] {
+                continue;
+            }
+            let f = self.level(i, qd[i]);
             if p.abs() > f {
                 self.anchor[i] = q[i] + p.signum() * f / self.stiffness[i];
             }

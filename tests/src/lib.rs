@@ -238,26 +238,42 @@ pub fn python_has(test: &str, modules: &str, pip: &str) -> bool {
     ok
 }
 
+/// The scenario of a [`python_rig`]: more `[loop]` lines for the loop scenario without a strip
+/// (a `&str` converts to this; `""`: none), or a whole scenario's text (e.g. a shipped scenario's
+/// with its mode set to lockstep).
+pub enum RigScenario<'a> {
+    LoopExtra(&'a str),
+    Text(&'a str),
+}
+
+impl<'a> From<&'a str> for RigScenario<'a> {
+    fn from(loop_extra: &'a str) -> Self {
+        RigScenario::LoopExtra(loop_extra)
+    }
+}
+
 /// A lockstep rig running `duration_s` with the Python controller `script` (an executable file
 /// with a shebang, started as `script --rig NAME --scenario FILE` like `rig run` starts any
 /// controller), holding the Python serial lock; the test fails when python3 lacks `modules`
-/// ([`python_has`]). `loop_extra`: more `[loop]` lines for the scenario (e.g. `"peer_stall_timeout_s = 0.3\n"`).
-pub fn python_rig(
+/// ([`python_has`]). `scenario`: e.g. `"peer_stall_timeout_s = 0.3\n"` ([`RigScenario`]).
+pub fn python_rig<'a>(
     test: &str,
     tag: &str,
     duration_s: f64,
     script: &Path,
     modules: &str,
     pip: &str,
-    loop_extra: &str,
+    scenario: impl Into<RigScenario<'a>>,
 ) -> Option<(MutexGuard<'static, ()>, TestRig, Daemon, Daemon)> {
     let g = PYTHON_SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     if !python_has(test, modules, pip) {
         return None;
     }
     let mut t = TestRig::new(tag, "lockstep");
-    if !loop_extra.is_empty() {
-        t.scenario = write_scenario(&t.dir, "lockstep", loop_extra);
+    match scenario.into() {
+        RigScenario::LoopExtra("") => {}
+        RigScenario::LoopExtra(extra) => t.scenario = write_scenario(&t.dir, "lockstep", extra),
+        RigScenario::Text(text) => std::fs::write(&t.scenario, text).unwrap(),
     }
     let plant = t.plant(duration_s);
     let args = ["--rig", t.rig.as_str(), "--scenario", t.scenario.to_str().unwrap()];

@@ -49,10 +49,16 @@ fn servo_with(sensor: &str) -> String {
 /// never reads the wrench (so the sensor's noise does not move the arm); a wrapper gives it 5 s
 /// of patience with a loaded host.
 fn hold_controller() -> String {
+    hold_controller_with(&[])
+}
+
+/// [`hold_controller`] with more hold-controller arguments (`--free-joint1`, `--waypoints`, ...).
+fn hold_controller_with(extra: &[&str]) -> String {
     use std::os::unix::fs::PermissionsExt;
     let dir = temp_dir(&unique_rig("hold-wrapper"));
     let path = dir.join("hold-patient");
-    std::fs::write(&path, format!("#!/bin/sh\nexec {} --silence-ms 5000 \"$@\"\n", bin("hold-controller").display())).unwrap();
+    let extra: String = extra.iter().map(|a| format!(" '{a}'")).collect();
+    std::fs::write(&path, format!("#!/bin/sh\nexec {} --silence-ms 5000{extra} \"$@\"\n", bin("hold-controller").display())).unwrap();
     std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
     path.to_str().unwrap().to_string()
 }
@@ -229,4 +235,161 @@ fn the_filter_has_its_closed_form_gain_and_phase() {
         assert!((gain / want_gain - 1.0).abs() < 0.02, "{f} Hz: gain {gain} vs {want_gain}");
         assert!((phase - want_phase).abs() < 2f64.to_radians(), "{f} Hz: phase {phase} vs {want_phase}");
     }
+}
+
+/// The tool's load on the sensor against m g, end to end: the hold visits three orientations of
+/// the tool (tool down, then joints 4 and 5 turned), the sensor with every stage off reads the
+/// whole tool hanging on it. At rest, in each orientation, the force in base axes is (0, 0, −m g)
+/// and the moment about the TCP is (c − p) × F in tool axes, c the tool's centre; while moving,
+/// the force is m (g − a) with a the centre's acceleration from second differences of its
+/// recorded positions (forward kinematics of the recorded q, not the plant's Jacobian).
+#[test]
+fn the_tool_loads_the_sensor_with_m_g_in_three_orientations_and_m_a_while_moving() {
+    let (move_s, dwell_s) = (3.0, 1.0);
+    let duration = dwell_s + 2.0 * (move_s + dwell_s);
+    let waypoints = "0,0,0,0.6,0.5,0;0,0,0,-0.5,-0.6,1";
+    let controller = hold_controller_with(&["--waypoints", waypoints, "--move-s", "3", "--dwell-s", "1"]);
+    let (rec, s) = lockstep_with("cell-toolload", &hold_with(duration, "[sensor]\nenabled = true\n"), &["--controller", &controller]);
+    let robot = plant_sim::physics::plant_robot(&s);
+    let tool = *robot.tool().unwrap();
+    let m = s.robot.tool_mass_kg;
+    assert_eq!(tool.mass_kg, m);
+    let t = s.loop_.period_s;
+    let g = Vector3::new(0.0, 0.0, -robot::Robot::GRAVITY_MPS2);
+    let states: Vec<(nalgebra::Matrix3<f64>, Vector3<f64>)> = rec
+        .joint_state
+        .iter()
+        .map(|st| {
+            let f = robot.frames(&robot::Vec6::from(st.q));
+            (f.rot[6], f.pos[6] + f.rot[6] * tool.com_flange_m)
+        })
+        .collect();
+    let reading = |k: usize| {
+        let w = &rec.wrench[k];
+        (Vector3::from(w.force), Vector3::from(w.torque))
+    };
+    assert_eq!(rec.wrench.len(), rec.joint_state.len());
+    // At rest: the last 0.3 s of each dwell.
+    let mut directions = Vec::new();
+    for k in 0..3 {
+        let end = ((dwell_s + k as f64 * (move_s + dwell_s)) / t).round() as usize;
+        let (mut worst_f, mut worst_m) = (0.0f64, 0.0f64);
+        for (i, (rot, _)) in states.iter().enumerate().take(end).skip(end - 300) {
+            let (f, mo) = reading(i);
+            worst_f = worst_f.max((rot * f - g * m).norm());
+            worst_m = worst_m.max((mo - (tool.com_flange_m - tool.tcp_offset_flange_m).cross(&f)).norm());
+        }
+        let (f, _) = reading(end - 1);
+        eprintln!(
+            "orientation {k}: tool axes F = ({:.4}, {:.4}, {:.4}) N, |F| = {:.6} N (m g = {:.6} N); worst |R F - m g| {worst_f:.2e} N, moment {worst_m:.2e} N m",
+            f.x,
+            f.y,
+            f.z,
+            f.norm(),
+            m * robot::Robot::GRAVITY_MPS2
+        );
+        assert!(worst_f < 1e-6, "orientation {k}: force off m g by {worst_f} N");
+        assert!(worst_m < 1e-7, "orientation {k}: moment off (c - p) x F by {worst_m} N m");
+        directions.push(f.normalize());
+    }
+    // Three orientations of the tool against gravity, pairwise at least 0.5 rad apart.
+    for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+        let angle = directions[a].dot(&directions[b]).clamp(-1.0, 1.0).acos();
+        assert!(angle > 0.5, "orientations {a} and {b} only {angle} rad apart");
+    }
+    // Moving: the plant's acceleration over tick k is (v_k − v_{k−1})/T, i.e. a(t_k − T/2): the mean
+    // of the central second differences of the centre's positions at k − 1 and k.
+    let (mut worst, mut peak) = (0.0f64, 0.0f64);
+    for i in 2..states.len() - 1 {
+        let p = |j: usize| states[j].1;
+        let a = ((p(i + 1) - p(i) * 2.0 + p(i - 1)) + (p(i) - p(i - 1) * 2.0 + p(i - 2))) / (2.0 * t * t);
+        let (rot, _) = states[i];
+        let (f, _) = reading(i);
+        peak = peak.max((a * m).norm());
+        worst = worst.max((rot * f - (g - a) * m).norm());
+    }
+    eprintln!("moving: peak m|a| {peak:.4} N, worst |R F - m (g - a)| {worst:.2e} N");
+    assert!(peak > 0.05, "the moves are too gentle to show the inertial load: {peak} N");
+    assert!(worst < 0.005 * peak, "inertial load off by {worst} N (peak {peak} N)");
+}
+
+/// Drives end to end: joint 1 (vertical axis, no gravity) left to a constant torque by the hold
+/// controller (`--free-joint1`), the other joints held. Under 0.8 of its breakaway it does not
+/// move by one encoder count from 0.2 s to 1.2 s; under twice its breakaway its recorded angle
+/// follows the closed-form joint M₁₁ q̈ = τ − F(q̇) − b q̇ with F the Stribeck curve
+/// τ_c + (τ_s − τ_c) exp(−(q̇/v_s)²) and b the viscous friction, integrated from the recorded
+/// applied torque; every recorded q is a whole number of encoder counts (the quantisation step).
+#[test]
+fn a_joint_sticks_below_breakaway_and_accelerates_above_it_as_the_closed_form_says() {
+    let (tc, ts, vs, b) = (5.0, 6.5, 0.01, 2.0);
+    let drives = format!(
+        "[drives]\nenabled = true\ncoulomb_nm = [{tc}, 5, 2.5, 0.3, 0.3, 0.15]\nbreakaway_nm = [{ts}, 6.5, 3.25, 0.4, 0.4, 0.2]\n\
+         stribeck_radps = [{vs}, 0.01, 0.01, 0.02, 0.02, 0.02]\nviscous_nms = [{b}, 2, 1, 0.1, 0.1, 0.05]\n\
+         encoder_counts_per_rev = [4194304, 4194304, 4194304, 4194304, 4194304, 4194304]\nvelocity_filter_hz = 100\n"
+    );
+    let count = std::f64::consts::TAU / 4_194_304.0;
+    let run = |tag: &str, tau: f64, duration: f64| {
+        let controller = hold_controller_with(&["--free-joint1", "--offset-nm", &tau.to_string()]);
+        lockstep_with(tag, &hold_with(duration, &drives), &["--controller", &controller])
+    };
+    let whole_counts = |rec: &Recording| {
+        for st in &rec.joint_state {
+            for (j, q) in st.q.iter().enumerate() {
+                let c = q / count;
+                assert!((c - c.round()).abs() < 1e-6, "tick {} joint {}: {q} rad is not a whole number of counts", st.tick, j + 1);
+            }
+        }
+    };
+
+    let (held, _) = run("cell-stick", 0.8 * ts, 1.3);
+    whole_counts(&held);
+    let drift = (held.joint_state[1200].q[0] - held.joint_state[200].q[0]).abs();
+    eprintln!("joint 1 at 0.8 breakaway: encoder drift {drift:.3e} rad over 1 s (one count {count:.3e} rad)");
+    assert!(drift < count, "drift {drift} rad");
+
+    let (moving, s) = run("cell-slide", 2.0 * ts, 0.7);
+    whole_counts(&moving);
+    let robot = plant_sim::physics::plant_robot(&s);
+    let q0 = robot::Vec6::from(moving.joint_state[0].q);
+    let m11 = robot.mass_matrix(&q0)[(0, 0)];
+    let b = b + s.robot.viscous_nms[0];
+    let period = s.loop_.period_s;
+    // The scalar joint, stuck while |τ| ≤ τ_s at rest, through each tick's applied torque
+    // (JointState k + 1's tau_applied is what acted over tick k), 1000 Euler steps per tick.
+    let (mut q, mut v) = (0.0f64, 0.0f64);
+    let mut model = vec![(0.0, 0.0)];
+    for st in &moving.joint_state[1..] {
+        let tau = st.tau_applied[0];
+        let h = period / 1000.0;
+        for _ in 0..1000 {
+            let level = tc + (ts - tc) * (-(v / vs).powi(2)).exp();
+            let a = if v == 0.0 && tau.abs() <= ts {
+                0.0
+            } else {
+                (tau - level * if v == 0.0 { tau.signum() } else { v.signum() } - b * v) / m11
+            };
+            let v_new = v + a * h;
+            // friction does not reverse the motion within a step
+            v = if v != 0.0 && v_new * v < 0.0 { 0.0 } else { v_new };
+            q += v * h;
+        }
+        model.push((q, v));
+    }
+    // The closed form is the sliding joint's: compared from 0.1 s on, after the breakaway (the
+    // stick spring's pre-sliding deflection, about τ_s/k = 2e-5 rad, and its release are the stick
+    // model's, not the closed form's), the angle moved since then and the drive's speed estimate.
+    let k0 = 100;
+    let mut worst = 0.0f64;
+    for k in [200usize, 300, 400, 500, 600, 699] {
+        let got = moving.joint_state[k].q[0] - moving.joint_state[k0].q[0];
+        let want = model[k].0 - model[k0].0;
+        let (got_v, want_v) = (moving.joint_state[k].qd[0], model[k].1);
+        eprintln!(
+            "joint 1 at twice breakaway, {:.1} s: moved {got:.6} rad since 0.1 s (closed form {want:.6}), speed estimate {got_v:.5} rad/s ({want_v:.5})",
+            k as f64 * period
+        );
+        worst = worst.max((got / want - 1.0).abs()).max((got_v / want_v - 1.0).abs());
+    }
+    eprintln!("M11 {m11:.3} kg m^2; worst deviation from the closed form {:.2} %", worst * 100.0);
+    assert!(worst < 0.03, "off the closed form by {:.1} %", worst * 100.0);
 }

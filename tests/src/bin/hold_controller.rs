@@ -1,5 +1,10 @@
-//! `hold-controller --rig NAME --scenario FILE [--contract-version N] [--offset-nm X]
+//! `hold-controller --rig NAME --scenario FILE [--contract-version N] [--offset-nm X] [--free-joint1]
+//! [--waypoints DQ;DQ;... [--move-s S] [--dwell-s S]]
 //! [--answer-after-us MIN:MAX [--seed N]] [--sleep-before-open-s S] [--open-rig OTHER] [--iceoryx2-defaults]`
+//!
+//! `--free-joint1` and `--waypoints` serve the realistic cell's checks (issue 23): joint 1 left to
+//! the offset torque alone (a joint under a known torque against its friction), and the hold
+//! moved smoothly through other poses (the tool's load on the sensor in other orientations).
 //!
 //! `--answer-after-us` answers late, as a slow controller would (the take-over test, issue 22).
 //! The last three make it a controller that never connects, as a user's port gone wrong would
@@ -36,6 +41,19 @@ struct Args {
     /// Constant torque added to joint 1, N m (to make this controller's output recognisable).
     #[arg(long, default_value_t = 0.0)]
     offset_nm: f64,
+    /// Joint 1 is not held: its command is `--offset-nm` alone (the other joints are held).
+    #[arg(long)]
+    free_joint1: bool,
+    /// Poses to visit after the first, as joint offsets from the first state's q, rad: six
+    /// comma-separated values per pose, poses separated by `;`. The hold stays at the first q for
+    /// `--dwell-s`, then moves to each pose in turn over `--move-s` (a cycloidal blend, fed forward)
+    /// and stays there `--dwell-s`.
+    #[arg(long)]
+    waypoints: Option<String>,
+    #[arg(long, default_value_t = 2.0)]
+    move_s: f64,
+    #[arg(long, default_value_t = 1.0)]
+    dwell_s: f64,
     /// From this tick on, send NaN on joint 1 (testing the plant's refusal).
     #[arg(long)]
     nan_from_tick: Option<u64>,
@@ -83,6 +101,42 @@ fn parse_range_us(s: &str) -> Result<(u64, u64), String> {
         return Err(format!("MIN {lo} is above MAX {hi}"));
     }
     Ok((lo, hi))
+}
+
+/// `a,b,c,d,e,f;a,b,...`: six offsets (rad) per pose.
+fn parse_waypoints(s: &str) -> Result<Vec<Vec6>, String> {
+    s.split(';')
+        .map(|pose| {
+            let v: Vec<f64> =
+                pose.split(',').map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}"))).collect::<Result<_, _>>()?;
+            if v.len() != 6 {
+                return Err(format!("{pose:?}: six joint offsets per pose"));
+            }
+            Ok(Vec6::from_column_slice(&v))
+        })
+        .collect()
+}
+
+/// The hold's reference offset from the first q, its velocity and acceleration at `t_s` after the
+/// first state: dwell, then per waypoint a cycloidal blend over `move_s` and a dwell.
+fn reference(waypoints: &[Vec6], move_s: f64, dwell_s: f64, t_s: f64) -> (Vec6, Vec6, Vec6) {
+    let mut from = Vec6::zeros();
+    let mut t = t_s - dwell_s;
+    for to in waypoints {
+        if t < 0.0 {
+            break;
+        }
+        if t < move_s {
+            // cycloidal: s = τ − sin(2πτ)/(2π), τ = t/move_s; acceleration continuous, zero at both ends
+            let w = std::f64::consts::TAU / move_s;
+            let d = to - from;
+            let (sin, cos) = (w * t).sin_cos();
+            return (from + d * (t / move_s - sin / std::f64::consts::TAU), d * ((1.0 - cos) / move_s), d * (w * sin / move_s));
+        }
+        from = *to;
+        t -= move_s + dwell_s;
+    }
+    (from, Vec6::zeros(), Vec6::zeros())
 }
 
 /// A uniform draw in `lo..=hi` from a xorshift64* state (never zero).
@@ -138,13 +192,14 @@ fn run(a: &Args) -> anyhow::Result<()> {
     let ports = ControllerPorts::open(a.open_rig.as_deref().unwrap_or(&a.rig), "hold-controller")?;
     let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
     let id = ((std::process::id() as u64) << 32) | nanos as u64;
-    let mut hold: Option<Vec6> = None;
+    let mut hold: Option<(Vec6, u64)> = None;
     let mut last_state = Instant::now();
     let mut rng = a.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
     if a.answer_after_us.is_some() {
         // SAFETY: prctl with an integer argument changes only this thread's timer slack.
         unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) };
     }
+    let waypoints = a.waypoints.as_deref().map(parse_waypoints).transpose().map_err(anyhow::Error::msg)?;
     let mut answered = false;
     loop {
         // Wake on the plant's notification; a timeout only serves the dead-plant check.
@@ -165,9 +220,18 @@ fn run(a: &Args) -> anyhow::Result<()> {
         }
         let q = Vec6::from(st.q);
         let qd = Vec6::from(st.qd);
-        let q_ref = *hold.get_or_insert(q);
-        let qdd = (q_ref - q) * (OMEGA * OMEGA) - qd * (2.0 * ZETA * OMEGA);
+        let (q0, tick0) = *hold.get_or_insert((q, st.tick));
+        let t_s = (st.tick - tick0) as f64 * s.loop_.period_s;
+        let (dq, qd_ref, qdd_ref) =
+            waypoints.as_deref().map_or((Vec6::zeros(), Vec6::zeros(), Vec6::zeros()), |w| reference(w, a.move_s, a.dwell_s, t_s));
+        let mut qdd = qdd_ref + (q0 + dq - q) * (OMEGA * OMEGA) + (qd_ref - qd) * (2.0 * ZETA * OMEGA);
+        if a.free_joint1 {
+            qdd[0] = 0.0;
+        }
         let mut tau = robot.rnea(&q, &qd, &qdd);
+        if a.free_joint1 {
+            tau[0] = 0.0;
+        }
         tau[0] += a.offset_nm;
         if a.nan_from_tick.is_some_and(|k| st.tick >= k) {
             tau[0] = f64::NAN;

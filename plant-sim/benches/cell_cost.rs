@@ -1,0 +1,122 @@
+//! Cost of the realistic cell (issue 23): the plant's per-tick compute of the default scenario
+//! against `scenarios/cell.toml` with its `[sensor]`, `[drives]` and `[mismatch]` sections on,
+//! both with the wheel pressing the strip (the rolling phase's contact path, where a run spends
+//! its time). One tick is what the plant computes between receiving a torque and publishing the
+//! next state: the integrator's substeps (with the cell: the friction in every stage and the
+//! stick springs' slip), then the cell's encoders and sensor (the tool's load, the sensor's chain).
+//! Criterion-free: interleaved rounds of the two, so that a loaded host slows both alike; prints
+//! each one's median ns per tick and the ratio of the medians.
+//!
+//! `cargo bench -p plant-sim --bench cell_cost` (`-- ROUNDS TICKS`, default 21 rounds of 2000 ticks).
+
+use std::path::Path;
+use std::time::Instant;
+
+use nalgebra::Vector3;
+use plant_sim::drives::Encoders;
+use plant_sim::physics::Physics;
+use plant_sim::sensor::{SensorChain, ToolLoad};
+use robot::Vec6;
+use scenarios::Scenario;
+
+/// Force the wheel presses down with, N (the default run's set-point).
+const PRESS_N: f64 = 10.0;
+/// Joint damping of the bench's torque per unit of the joint's inertia, 1/s (settles the wheel on
+/// the strip; proportional to M_ii so that the light wrist joints stay stable in the integrator).
+const DAMPING_PER_S: f64 = 50.0;
+
+struct Plant {
+    physics: Physics,
+    /// The constant part of the command: gravity and the press, at the start pose.
+    tau0: Vec6,
+    /// Joint damping, N m s/rad.
+    damping: Vec6,
+    sensor: Option<(SensorChain, ToolLoad)>,
+    encoders: Option<Encoders>,
+    out: [f64; 6],
+}
+
+impl Plant {
+    /// The plant of `file` with `edit` applied to its scenario.
+    fn new(file: &str, edit: impl Fn(&mut Scenario)) -> Plant {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let mut s = Scenario::load(&root.join("scenarios").join(file)).unwrap();
+        edit(&mut s);
+        // The wheel starts 10 µm above the strip and presses it.
+        s.trajectory.approach_height_mm = 0.01;
+        let physics = Physics::new(&s, &strip::cache::cache_dir()).unwrap();
+        let robot = physics.robot();
+        let q = physics.q();
+        let frames = robot.frames(&q);
+        let jac = robot.jacobian_point(&frames, &robot.tcp_position(&frames));
+        let press = jac.transpose() * Vec6::new(0.0, 0.0, -PRESS_N, 0.0, 0.0, 0.0);
+        let tau0 = physics.gravity_torque() + press;
+        let damping = robot.mass_matrix(&q).diagonal() * DAMPING_PER_S;
+        let period = s.loop_.period_s;
+        let sensor = s.sensor.enabled.then(|| (SensorChain::new(&s.sensor, period), ToolLoad::new(robot, period)));
+        let encoders = s.drives.enabled.then(|| Encoders::new(&s.drives, period, &q));
+        Plant { physics, tau0, damping, sensor, encoders, out: [0.0; 6] }
+    }
+
+    /// One tick: integrate, then read the encoders and the sensor (as `tick.rs` does).
+    fn tick(&mut self) {
+        let tau = self.tau0 - self.physics.qd().component_mul(&self.damping);
+        self.physics.step_tick(std::hint::black_box(&tau));
+        if let Some(e) = self.encoders.as_mut() {
+            e.update(&self.physics.q(), &self.physics.qd());
+        }
+        let (f, m) = self.physics.wrench_on_tool();
+        if let Some((chain, load)) = self.sensor.as_mut() {
+            let l = load.sample(self.physics.robot(), &self.physics.q(), &self.physics.qd());
+            let input = std::array::from_fn(|i| if i < 3 { f[i] } else { m[i - 3] } + l[i]);
+            self.out = chain.sample(&input).0;
+        } else {
+            self.out = [f[0], f[1], f[2], m[0], m[1], m[2]];
+        }
+        std::hint::black_box(&self.out);
+    }
+
+    /// Mean ns per tick over `n` ticks.
+    fn time(&mut self, n: usize) -> f64 {
+        let t0 = Instant::now();
+        for _ in 0..n {
+            self.tick();
+        }
+        t0.elapsed().as_nanos() as f64 / n as f64
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    // `cargo bench` passes `--bench`; numbers are ours.
+    let nums: Vec<usize> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();
+    let (rounds, ticks) = (nums.first().copied().unwrap_or(21), nums.get(1).copied().unwrap_or(2000));
+    let mut plants = [
+        ("default.toml (sections off)", Plant::new("default.toml", |_| {})),
+        ("cell.toml (sensor, drives, mismatch on)", Plant::new("cell.toml", |_| {})),
+        ("cell.toml without [sensor]", Plant::new("cell.toml", |s| s.sensor.enabled = false)),
+        ("cell.toml without [drives]", Plant::new("cell.toml", |s| s.drives.enabled = false)),
+    ];
+    // Settle all on the strip.
+    for (name, p) in plants.iter_mut() {
+        p.time(2000);
+        let f = Vector3::from(p.physics.wrench_on_tool().0).norm();
+        println!("{name}: in contact {} (|contact force| {f:.2} N)", p.physics.in_contact());
+    }
+    let mut ns = vec![Vec::new(); plants.len()];
+    for _ in 0..rounds {
+        for (i, (_, p)) in plants.iter_mut().enumerate() {
+            ns[i].push(p.time(ticks));
+        }
+    }
+    println!("per-tick plant compute, median of {rounds} interleaved rounds of {ticks} ticks:");
+    let base = median(&mut ns[0]);
+    for (i, (name, _)) in plants.iter().enumerate() {
+        let m = median(&mut ns[i]);
+        println!("  {name}: {m:.0} ns, {:.3} of the default ({:+.1} %)", m / base, (m / base - 1.0) * 100.0);
+    }
+}
