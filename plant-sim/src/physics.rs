@@ -51,6 +51,38 @@ pub fn plant_robot(s: &Scenario) -> Robot {
     }
 }
 
+/// The contact tables of a scenario's strip at the reference bump and its substep (None without
+/// the strip): from the on-disk cache beside the strip model (`table_cache`), else built from the
+/// strip model (loaded or built in `cache_dir`) and cached. `rig sweep` calls it once per strip
+/// for all its cases.
+pub fn strip_tables(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Option<Arc<StripTables>>> {
+    if !s.strip.enabled {
+        return Ok(None);
+    }
+    let params = crate::contact::strip_params(s).with_reference_bulge();
+    let t0 = std::time::Instant::now();
+    let h_s = substep_s(s);
+    let path = crate::table_cache::path(cache_dir, &params, h_s);
+    if let Some(t) = crate::table_cache::load(&path, &params, h_s) {
+        tracing::info!(load_ms = t0.elapsed().as_secs_f64() * 1e3, "contact tables loaded from {}", path.display());
+        return Ok(Some(Arc::new(t)));
+    }
+    let model =
+        strip::StripModel::load_or_build_in(cache_dir, &params).with_context(|| format!("strip model (cache {})", cache_dir.display()))?;
+    let t_model = t0.elapsed();
+    let tables = StripTables::new(&model, h_s);
+    if let Err(e) = crate::table_cache::save(&tables, &path) {
+        tracing::warn!("could not cache the contact tables in {}: {e}", path.display());
+    }
+    // Two parts of the plant's start-up (README, "Lockstep start-up").
+    tracing::info!(
+        model_ms = t_model.as_secs_f64() * 1e3,
+        tables_ms = (t0.elapsed() - t_model).as_secs_f64() * 1e3,
+        "strip model loaded, contact tables built and cached"
+    );
+    Ok(Some(Arc::new(tables)))
+}
+
 /// Plant state and integrator.
 pub struct Physics {
     robot: Robot,
@@ -76,38 +108,7 @@ impl Physics {
     /// Build the plant of a scenario, at rest in the start pose (IK of [`geometry::start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
-        let tables = if s.strip.enabled {
-            let params = crate::contact::strip_params(s).with_reference_bulge();
-            let t0 = std::time::Instant::now();
-            let h_s = substep_s(s);
-            let path = crate::table_cache::path(cache_dir, &params, h_s);
-            let tables = match crate::table_cache::load(&path, &params, h_s) {
-                Some(t) => {
-                    tracing::info!(load_ms = t0.elapsed().as_secs_f64() * 1e3, "contact tables loaded from {}", path.display());
-                    t
-                }
-                None => {
-                    let model = strip::StripModel::load_or_build_in(cache_dir, &params)
-                        .with_context(|| format!("strip model (cache {})", cache_dir.display()))?;
-                    let t_model = t0.elapsed();
-                    let tables = StripTables::new(&model, h_s);
-                    if let Err(e) = crate::table_cache::save(&tables, &path) {
-                        tracing::warn!("could not cache the contact tables in {}: {e}", path.display());
-                    }
-                    // Two parts of the plant's start-up (README, "Lockstep start-up").
-                    tracing::info!(
-                        model_ms = t_model.as_secs_f64() * 1e3,
-                        tables_ms = (t0.elapsed() - t_model).as_secs_f64() * 1e3,
-                        "strip model loaded, contact tables built and cached"
-                    );
-                    tables
-                }
-            };
-            Some(Arc::new(tables))
-        } else {
-            None
-        };
-        Physics::with_strip_tables(s, tables)
+        Physics::with_strip_tables(s, strip_tables(s, cache_dir)?)
     }
 
     /// [`Physics::new`] with the strip's tables given (`rig sweep` builds them once for all its
