@@ -232,8 +232,8 @@ pub fn write_overridden(base_path: &Path, set: &[Axis], out: &Path) -> anyhow::R
     Ok(out.to_path_buf())
 }
 
-/// The strips of a sweep's cases: each strip model loaded (or built) once and its contact tables
-/// built once, shared (`Arc`) by every case with the same strip and substep. The bump's height is
+/// The strips of a sweep's cases: each strip's contact tables loaded from the table cache (or
+/// built from its model and cached) once, shared (`Arc`) by every case with the same strip and substep. The bump's height is
 /// not part of it: a case scales the reference bump's offsets to its height
 /// (`strip::StripParams::bulge_scale`), exactly as its daemon run does.
 pub struct SharedStrips {
@@ -259,9 +259,8 @@ impl SharedStrips {
             match all.iter().find(|(p, hb, _)| *p == params && *hb == h.to_bits()) {
                 Some((_, _, t)) => t.clone(),
                 None => {
-                    let model = strip::StripModel::load_or_build_in(&self.cache_dir, &params)
-                        .with_context(|| format!("strip model (cache {})", self.cache_dir.display()))?;
-                    let t = Arc::new(plant_sim::contact::StripTables::new(&model, h));
+                    // From the table cache (a daemon run's too), else built and cached.
+                    let t = plant_sim::physics::strip_tables(s, &self.cache_dir)?.context("the scenario's strip is enabled")?;
                     all.push((params, h.to_bits(), t.clone()));
                     t
                 }

@@ -91,7 +91,7 @@ impl ContactGeometry {
 /// Wheel-direction quantities tabulated over z_a (see the module docs), flattened grid-major.
 /// A "real row" of a complex vector v over the modes is `[Re v, Im v]` (2 × modes values); a
 /// row multiplied with a state real row as `[Re c, −Im c] · [Re x, Im x]` gives Re(c x).
-#[derive(Debug)]
+#[derive(Debug, Default)]
 struct WheelTable {
     z0_m: f64,
     n: usize,
@@ -208,6 +208,25 @@ struct TableBlock {
 }
 
 impl WheelTable {
+    /// A table of `n` grid points of zeros: rows of `row` values, `n_cl` centre-line and `n_tcl`
+    /// top centre-line values per point, starting at z = 0.
+    fn zeroed(n: usize, row: usize, n_cl: usize, n_tcl: usize) -> WheelTable {
+        let v = |len: usize| vec![0.0; n * len];
+        WheelTable {
+            z0_m: 0.0,
+            n,
+            gb: v(row),
+            c: v(row),
+            cgb_point: v(1),
+            cgb_cross: v(1),
+            d_ww: v(1),
+            d_sum: v(1),
+            bulge_w: v(1),
+            d_cl: v(n_cl),
+            d_tcl: v(n_tcl),
+        }
+    }
+
     /// Table for `model` with the substep's ZOH factors γ = (e^{λh} − 1)/λ per mode.
     ///
     /// Every entry is the plain formula's, bit for bit (the test `fast_table_build_is_the_plain_one_bit_for_bit`
@@ -220,19 +239,7 @@ impl WheelTable {
         let n_cl = cl_rows.len();
         let n = (model.params.length_m / TABLE_STEP_M).round() as usize + 1;
         let row = 2 * modes;
-        let mut t = WheelTable {
-            z0_m: 0.0,
-            n,
-            gb: vec![0.0; n * row],
-            c: vec![0.0; n * row],
-            cgb_point: vec![0.0; n],
-            cgb_cross: vec![0.0; n],
-            d_ww: vec![0.0; n],
-            d_sum: vec![0.0; n],
-            bulge_w: vec![0.0; n],
-            d_cl: vec![0.0; n * n_cl],
-            d_tcl: vec![0.0; n * tcl_rows.len()],
-        };
+        let mut t = WheelTable::zeroed(n, row, n_cl, tcl_rows.len());
         let n_top = model.n_top();
         // Column sums of D over the bottom rows (total bottom reaction per unit top force).
         let d_colsum: Vec<f64> = (0..n_top).map(|j| (0..model.n_bottom()).map(|r| model.d[(n_top + r, j)]).sum()).collect();
@@ -408,15 +415,42 @@ impl TableParts {
         &self.0
     }
     pub(crate) fn from_vecs(v: Vec<Vec<f64>>) -> Option<TableParts> {
-        (v.len() == 21).then_some(TableParts(v))
+        Some(TableParts(v))
     }
+}
+
+/// The [`StripTables`]' `f64` vectors of `$t` in the cache file's order, as references (`mut`:
+/// mutable): the one list both [`StripTables::parts`] and [`StripTables::from_parts`] read.
+macro_rules! table_vecs {
+    ($t:ident $(, $m:ident)?) => {
+        [
+            &$($m)? $t.table.gb,
+            &$($m)? $t.table.c,
+            &$($m)? $t.table.cgb_point,
+            &$($m)? $t.table.cgb_cross,
+            &$($m)? $t.table.d_ww,
+            &$($m)? $t.table.d_sum,
+            &$($m)? $t.table.bulge_w,
+            &$($m)? $t.table.d_cl,
+            &$($m)? $t.table.d_tcl,
+            &$($m)? $t.z_re,
+            &$($m)? $t.z_im,
+            &$($m)? $t.csum,
+            &$($m)? $t.cl_z_m,
+            &$($m)? $t.cl_area_m2,
+            &$($m)? $t.cl_bulge_n,
+            &$($m)? $t.ccl,
+            &$($m)? $t.ctcl,
+            &$($m)? $t.tcl_bulge_m,
+        ]
+    };
 }
 
 /// What the contact needs of a strip model and a substep, computed once: the wheel table (most of
 /// a run's start-up) and the modal rows of the recorded outputs. It holds the bump of the model
 /// it was built from; a contact scales that bump to its own height (the bump's offsets are linear
 /// in it), so every case of a sweep over bump heights shares one `Arc` of it.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct StripTables {
     /// The model's parameters (its bump: the one the bump terms below hold).
     params: StripParams,
@@ -521,79 +555,42 @@ impl StripTables {
         }
     }
 
-    /// The tables as plain vectors in a fixed order, for the on-disk cache (`table_cache`).
+    /// The tables as plain vectors in a fixed order, for the on-disk cache (`table_cache`): the
+    /// scalars, the centre-line rows, the top nodes, then [`table_vecs!`]'s vectors.
     pub(crate) fn parts(&self) -> TableParts {
-        let t = &self.table;
-        let scalars = vec![t.z0_m, t.n as f64, self.h_s, self.modes as f64, self.bulge_sum_n];
-        TableParts(vec![
-            scalars,
-            t.gb.clone(),
-            t.c.clone(),
-            t.cgb_point.clone(),
-            t.cgb_cross.clone(),
-            t.d_ww.clone(),
-            t.d_sum.clone(),
-            t.bulge_w.clone(),
-            t.d_cl.clone(),
-            t.d_tcl.clone(),
-            self.z_re.clone(),
-            self.z_im.clone(),
-            self.csum.clone(),
-            self.cl_rows.iter().map(|&r| r as f64).collect(),
-            self.cl_z_m.clone(),
-            self.cl_area_m2.clone(),
-            self.cl_bulge_n.clone(),
-            self.ccl.clone(),
-            self.ctcl.clone(),
-            self.tcl_bulge_m.clone(),
-            self.top_xyz_m.iter().flatten().copied().collect(),
-        ])
+        let t = self;
+        let scalars = vec![t.table.z0_m, t.table.n as f64, t.h_s, t.modes as f64, t.bulge_sum_n];
+        let rows = t.cl_rows.iter().map(|&r| r as f64).collect();
+        let top = t.top_xyz_m.iter().flatten().copied().collect();
+        TableParts([scalars, rows, top].into_iter().chain(table_vecs!(t).into_iter().cloned()).collect())
     }
 
     /// Tables from [`StripTables::parts`] of a model with parameters `params` and substep `h_s`;
     /// None when the parts do not fit together.
     pub(crate) fn from_parts(params: StripParams, h_s: f64, parts: TableParts) -> Option<StripTables> {
         let mut it = parts.0.into_iter();
-        let mut next = || it.next();
-        let sc = next()?;
+        let (sc, rows, top) = (it.next()?, it.next()?, it.next()?);
         let &[z0_m, n, h, modes, bulge_sum_n] = sc.as_slice() else { return None };
         let (n, modes) = (n as usize, modes as usize);
         if h.to_bits() != h_s.to_bits() {
             return None;
         }
-        let table = WheelTable {
-            z0_m,
-            n,
-            gb: next()?,
-            c: next()?,
-            cgb_point: next()?,
-            cgb_cross: next()?,
-            d_ww: next()?,
-            d_sum: next()?,
-            bulge_w: next()?,
-            d_cl: next()?,
-            d_tcl: next()?,
-        };
-        let t = StripTables {
+        let mut t = StripTables {
             params,
-            table,
+            table: WheelTable { z0_m, n, ..WheelTable::default() },
             h_s,
             modes,
-            z_re: next()?,
-            z_im: next()?,
-            csum: next()?,
-            cl_rows: next()?.iter().map(|&r| r as usize).collect(),
-            cl_z_m: next()?,
-            cl_area_m2: next()?,
-            cl_bulge_n: next()?,
             bulge_sum_n,
-            ccl: next()?,
-            ctcl: next()?,
-            tcl_bulge_m: next()?,
-            top_xyz_m: next()?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            cl_rows: rows.iter().map(|&r| r as usize).collect(),
+            top_xyz_m: top.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            ..StripTables::default()
         };
+        for v in table_vecs!(t, mut) {
+            *v = it.next()?;
+        }
         let row = 2 * modes;
-        let ok = t.table.gb.len() == n * row
+        let ok = it.next().is_none()
+            && t.table.gb.len() == n * row
             && t.table.c.len() == n * row
             && [&t.table.cgb_point, &t.table.cgb_cross, &t.table.d_ww, &t.table.d_sum, &t.table.bulge_w].iter().all(|v| v.len() == n)
             && t.z_re.len() == modes
@@ -938,19 +935,7 @@ pub(crate) mod tests {
         let n_cl = cl_rows.len();
         let n = (model.params.length_m / TABLE_STEP_M).round() as usize + 1;
         let row = 2 * modes;
-        let mut t = WheelTable {
-            z0_m: 0.0,
-            n,
-            gb: vec![0.0; n * row],
-            c: vec![0.0; n * row],
-            cgb_point: vec![0.0; n],
-            cgb_cross: vec![0.0; n],
-            d_ww: vec![0.0; n],
-            d_sum: vec![0.0; n],
-            bulge_w: vec![0.0; n],
-            d_cl: vec![0.0; n * n_cl],
-            d_tcl: vec![0.0; n * tcl_rows.len()],
-        };
+        let mut t = WheelTable::zeroed(n, row, n_cl, tcl_rows.len());
         let d_colsum: Vec<f64> = (0..n_top).map(|j| (0..n_bottom).map(|r| model.d[(n_top + r, j)]).sum()).collect();
         let mut w = vec![0.0; n_top];
         let mut dw = vec![0.0; n_top];

@@ -13,7 +13,7 @@ use strip::StripParams;
 
 use crate::contact::{StripTables, TableParts};
 
-const MAGIC: &[u8; 8] = b"RIGCTBL1";
+const MAGIC: &[u8; 8] = b"RIGCTBL2";
 
 /// FNV-1a of the table code, so an edit to it invalidates every cached table.
 fn code_hash() -> u64 {

@@ -65,6 +65,14 @@ impl Robot {
         cholesky_solve(m, tau - bias)
     }
 
+    /// The two halves of [`Robot::forward_dynamics_sc`] for an integrator that reuses them: the
+    /// factor of `M(q)` and the rigid-body bias `C(q, q̇) q̇ + g(q)` (no viscous friction) at the
+    /// q of `sc`. `factor.solve(&(tau - bias - self.friction_torque(qd)))` is the forward dynamics.
+    #[inline]
+    pub fn dynamics_parts_sc(&self, sc: &SinCos, qd: &Vec6) -> (MassFactor, Vec6) {
+        (MassFactor::new(&self.crba_local(sc)), self.rnea_local(sc, qd, &Vec6::zeros(), Self::GRAVITY_MPS2))
+    }
+
     /// Kinetic energy `qd^T M qd / 2` (J), armature included.
     pub fn kinetic_energy(&self, q: &Vec6, qd: &Vec6) -> f64 {
         0.5 * qd.dot(&(self.mass_matrix(q) * qd))
@@ -88,47 +96,76 @@ impl Robot {
 /// positive definite.
 #[inline(always)]
 pub fn cholesky_solve(m: Mat6, b: Vec6) -> Vec6 {
-    // Plain arrays: constant loop bounds let the compiler drop every bounds check.
-    let mut l = [[0.0f64; 6]; 6];
-    let mut inv_d = [0.0f64; 6];
-    let mut diag = [0.0f64; 6];
-    for j in 0..6 {
-        // ld[k] = L_jk D_k
-        let mut ld = [0.0f64; 6];
-        let mut d = m[(j, j)];
-        for k in 0..j {
-            ld[k] = l[j][k] * diag[k];
-            d -= l[j][k] * ld[k];
+    MassFactor::new(&m).solve(&b)
+}
+
+/// The `L D L^T` factor of a mass matrix ([`cholesky_solve`] in two halves): factor once, solve
+/// for several right-hand sides (the plant's integrator reuses one factor for a second stage).
+#[derive(Debug, Clone, Copy)]
+pub struct MassFactor {
+    /// Unit lower triangle L (below the diagonal) and 1/D.
+    l: [[f64; 6]; 6],
+    inv_d: [f64; 6],
+    /// False when `M` was not positive definite: every solve is NaN.
+    ok: bool,
+}
+
+impl MassFactor {
+    /// Factor symmetric positive definite `m` (its lower triangle is read).
+    #[inline(always)]
+    pub fn new(m: &Mat6) -> MassFactor {
+        // Plain arrays: constant loop bounds let the compiler drop every bounds check.
+        let mut l = [[0.0f64; 6]; 6];
+        let mut inv_d = [0.0f64; 6];
+        let mut diag = [0.0f64; 6];
+        for j in 0..6 {
+            // ld[k] = L_jk D_k
+            let mut ld = [0.0f64; 6];
+            let mut d = m[(j, j)];
+            for k in 0..j {
+                ld[k] = l[j][k] * diag[k];
+                d -= l[j][k] * ld[k];
+            }
+            // Also catches NaN pivots.
+            if d.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                return MassFactor { l, inv_d, ok: false };
+            }
+            let inv = 1.0 / d;
+            diag[j] = d;
+            inv_d[j] = inv;
+            for i in (j + 1)..6 {
+                let mut v = m[(i, j)];
+                for k in 0..j {
+                    v -= l[i][k] * ld[k];
+                }
+                l[i][j] = v * inv;
+            }
         }
-        // Also catches NaN pivots.
-        if d.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        MassFactor { l, inv_d, ok: true }
+    }
+
+    /// `M^-1 b`; NaN if `M` was not positive definite.
+    #[inline(always)]
+    pub fn solve(&self, b: &Vec6) -> Vec6 {
+        if !self.ok {
             return Vec6::from_element(f64::NAN);
         }
-        let inv = 1.0 / d;
-        diag[j] = d;
-        inv_d[j] = inv;
-        for i in (j + 1)..6 {
-            let mut v = m[(i, j)];
-            for k in 0..j {
-                v -= l[i][k] * ld[k];
+        let (l, inv_d) = (&self.l, &self.inv_d);
+        let mut x = [0.0f64; 6];
+        for i in 0..6 {
+            let mut v = b[i];
+            for k in 0..i {
+                v -= l[i][k] * x[k];
             }
-            l[i][j] = v * inv;
+            x[i] = v;
         }
-    }
-    let mut x = [0.0f64; 6];
-    for i in 0..6 {
-        let mut v = b[i];
-        for k in 0..i {
-            v -= l[i][k] * x[k];
+        for i in (0..6).rev() {
+            let mut v = x[i] * inv_d[i];
+            for k in (i + 1)..6 {
+                v -= l[k][i] * x[k];
+            }
+            x[i] = v;
         }
-        x[i] = v;
+        Vec6::from(x)
     }
-    for i in (0..6).rev() {
-        let mut v = x[i] * inv_d[i];
-        for k in (i + 1)..6 {
-            v -= l[k][i] * x[k];
-        }
-        x[i] = v;
-    }
-    Vec6::from(x)
 }

@@ -284,7 +284,7 @@ impl Default for LoopConfig {
             max_consecutive_misses: 20,
             lockstep_watchdog_s: 2.0,
             duration_s: 0.0,
-            substeps: 10,
+            substeps: 8,
             integrator: Integrator::Midpoint,
             safe_stop_damping_nms: 20.0,
             takeover_blend_s: 0.05,
