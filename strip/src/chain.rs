@@ -136,6 +136,7 @@ impl WindowChain {
     /// (`element_m`), so window nodes fall on the strip's nodes. Refuses, naming the field, a window
     /// longer than the strip, a spacing that leaves the wheel within `window_length_m / 4` of a
     /// window's end, and lengths that are not whole numbers of elements.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x > 0.0)` refuses NaN too, as in `StripParams::validate`
     pub fn new(strip_length_m: f64, window_length_m: f64, spacing_m: f64, element_m: f64) -> std::result::Result<WindowChain, StripError> {
         let bad = |field: &'static str, value: f64, why: &'static str| Err(StripError::Param { field, value, why });
         let whole = |v: f64| (v / element_m - (v / element_m).round()).abs() < 1e-6;
@@ -149,7 +150,7 @@ impl WindowChain {
             return bad("strip_length_m", strip_length_m, "must be a whole number of elements");
         }
         // the wheel stays within one spacing of its windows' centres: keep it L/4 off their ends
-        if !(spacing_m > 0.0 && spacing_m <= 0.25 * window_length_m + 1e-12) || !whole(spacing_m) {
+        if !(spacing_m > 0.0 && spacing_m <= 0.25 * window_length_m + 1e-12 && whole(spacing_m)) {
             return bad("window_spacing_m", spacing_m, "must be a whole number of elements in (0, window_length/4]");
         }
         let span = strip_length_m - window_length_m;
