@@ -59,6 +59,7 @@ pub fn strip_tables(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Option<Arc
     if !s.strip.enabled {
         return Ok(None);
     }
+    not_windowed(s)?;
     let params = crate::contact::strip_params(s).with_reference_bulge();
     let t0 = std::time::Instant::now();
     let h_s = substep_s(s);
@@ -128,6 +129,18 @@ pub struct Physics {
     lagged: Option<(robot::dynamics::MassFactor, Vec6)>,
 }
 
+/// A windowed (long) strip (issue 25, `strip.window_mm` > 0) is validated in statics
+/// (`strip::chain`) but its dynamics are not in the plant yet: refuse it rather than build one
+/// reduced model of the whole length.
+fn not_windowed(s: &Scenario) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        !s.strip.enabled || s.strip.window_mm == 0.0,
+        "strip.window_mm = {} mm: the windowed long strip (issue 25) is not wired into the plant yet; only its statics exist (strip::chain)",
+        s.strip.window_mm
+    );
+    Ok(())
+}
+
 impl Physics {
     /// Build the plant of a scenario, at rest in the start pose (IK of [`geometry::start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
@@ -140,6 +153,7 @@ impl Physics {
     /// (`contact::strip_params(s).with_reference_bulge()`) and substep; this plant scales their
     /// bump to the scenario's height. None without the strip.
     pub fn with_strip_tables(s: &Scenario, tables: Option<Arc<StripTables>>) -> anyhow::Result<Physics> {
+        not_windowed(s)?;
         anyhow::ensure!(tables.is_some() == s.strip.enabled, "strip tables are needed exactly when strip.enabled");
         let contact = match tables {
             Some(tables) => {
@@ -366,6 +380,17 @@ mod tests {
         let mut s = Scenario::default();
         s.strip.enabled = false;
         s
+    }
+
+    #[test]
+    fn a_windowed_strip_is_refused_before_any_model_is_built() {
+        // issue 25: only the statics of the window chain exist; a 600 mm strip must not be built
+        // as one reduced model (the cache directory does not exist: nothing may be written)
+        let mut s = Scenario::default();
+        s.strip.length_mm = 600.0;
+        s.strip.window_mm = 40.0;
+        let e = Physics::new(&s, Path::new("/nonexistent/strip-cache")).err().expect("refused").to_string();
+        assert!(e.contains("strip.window_mm = 40 mm") && e.contains("not wired into the plant"), "{e}");
     }
 
     #[test]

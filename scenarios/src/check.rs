@@ -14,7 +14,7 @@ use toml::de::{DeTable, DeValue};
 use toml::Spanned;
 
 use crate::fields::{self, fmt_num, fmt_value, lookup, Field, Kind, Range};
-use crate::{Place, Scenario, ScenarioError, MAX_FORCE_POINTS};
+use crate::{Place, Scenario, ScenarioError, MAX_FORCE_POINTS, MAX_SUBSTRATE_FEATURES};
 
 /// Where each field (and array element, `key[i]`) a file sets stands: its line and the byte
 /// range of its value.
@@ -237,6 +237,27 @@ impl Walker<'_> {
                 }
                 None => self.bad(key, line, v, format!("must be an array of [z_mm, force_n] pairs, not {}", a_type(val))),
             },
+            Kind::Rows { cols, .. } => {
+                let shape = format!("[{}]", cols.join(", "));
+                match val.as_array() {
+                    Some(a) if a.len() > MAX_SUBSTRATE_FEATURES => {
+                        self.bad(key, line, v, format!("must have at most {MAX_SUBSTRATE_FEATURES} rows, not {}", a.len()))
+                    }
+                    Some(a) => {
+                        for (i, e) in a.iter().enumerate() {
+                            let ek = format!("{key}[{i}]");
+                            let el = line_col(self.text, e.span().start).0;
+                            self.note(&ek, el, e);
+                            let row =
+                                e.get_ref().as_array().is_some_and(|p| p.len() == cols.len() && p.iter().all(|x| is_number(x.get_ref())));
+                            if !row {
+                                self.bad(ek, el, e, format!("must be a row of {} numbers {shape}", cols.len()));
+                            }
+                        }
+                    }
+                    None => self.bad(key, line, v, format!("must be an array of {shape} rows, not {}", a_type(val))),
+                }
+            }
             _ => {}
         }
     }
@@ -315,6 +336,29 @@ pub(crate) fn values(s: &Scenario, path: &Path, spans: Option<&Spans>) -> Result
                     }
                     previous_z = z_mm;
                     in_range(format!("{}[{i}] force_n", f.key), force_n, &force, " N", pass)?;
+                }
+            }
+            Kind::Rows { cols, ranges, rows } => {
+                let all = v.and_then(|v| v.as_array()).map_or(&[][..], |a| a.as_slice());
+                if all.len() > MAX_SUBSTRATE_FEATURES {
+                    return Err(bad(
+                        f.key.into(),
+                        format!("{} rows", all.len()),
+                        format!("must have at most {MAX_SUBSTRATE_FEATURES} rows"),
+                    ));
+                }
+                for (i, r) in all.iter().enumerate() {
+                    let vals: Vec<f64> = r.as_array().into_iter().flatten().map(|x| as_f64(x).unwrap_or(f64::NAN)).collect();
+                    for (c, (col, range)) in cols.iter().zip(ranges.iter()).enumerate() {
+                        in_range(format!("{}[{i}] {col}", f.key), vals.get(c).copied().unwrap_or(f64::NAN), range, &unit, pass)?;
+                    }
+                }
+                if pass == Pass::Relative {
+                    if let Err(e) = (rows.check)(s) {
+                        let value = if e.value.is_nan() { format!("{} rows", all.len()) } else { fmt_num(e.value) };
+                        let name = if e.value.is_nan() { f.key.to_string() } else { format!("{}[{}] {}", f.key, e.row, cols[e.col]) };
+                        return Err(bad(name, value, e.why));
+                    }
                 }
             }
             Kind::Choice(names) => {

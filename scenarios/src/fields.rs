@@ -6,7 +6,7 @@
 //! Values are in the units the file uses (mm where the name says `_mm`, µs for `_us`).
 
 use crate::geometry::STRIP_TOP_HEIGHT_M;
-use crate::{Scenario, MAX_FORCE_POINTS};
+use crate::{Scenario, MAX_FORCE_POINTS, MAX_SUBSTRATE_FEATURES};
 
 /// What a field holds in the file.
 #[derive(Debug, Clone, Copy)]
@@ -27,6 +27,31 @@ pub enum Kind {
         z: Range,
         force: Range,
     },
+    /// `[[a, b, c], ...]`: at most `MAX_SUBSTRATE_FEATURES` rows of `cols.len()` numbers, column
+    /// i within `ranges[i]`; `rows` checks the rows against each other and the other fields.
+    Rows {
+        cols: &'static [&'static str],
+        ranges: &'static [Range],
+        rows: RowsRule,
+    },
+}
+
+/// A condition across the rows of a `Kind::Rows` field (order, overlap, extent).
+#[derive(Debug, Clone, Copy)]
+pub struct RowsRule {
+    /// What must hold, worded to follow "must" (the README says it).
+    pub text: &'static str,
+    /// Ok, or the first offending row and column with the message's "why".
+    pub check: fn(&Scenario) -> Result<(), RowError>,
+}
+
+/// The row, column and value a `RowsRule` refuses, and why.
+#[derive(Debug, Clone)]
+pub struct RowError {
+    pub row: usize,
+    pub col: usize,
+    pub value: f64,
+    pub why: String,
 }
 
 /// One end of a valid range, in the field's unit.
@@ -166,6 +191,82 @@ fn lift_peak_speed_mm_s(s: &Scenario) -> f64 {
     std::f64::consts::FRAC_PI_2 * t.lift_mm / t.lift_s
 }
 
+/// Longest windowed strip, mm: a door opening is 3-4 m (issue 25).
+const MAX_STRIP_MM: f64 = 5000.0;
+
+/// Whether `x` is a whole number of `unit` (to a millionth of it).
+fn whole(x: f64, unit: f64) -> bool {
+    (x / unit - (x / unit).round()).abs() < 1e-6
+}
+
+const BUMP_RANGES: [Range; 3] =
+    [range(lo_in(0.0), of(1.0, "strip.length_mm", true)), POSITIVE, range(lo_ex(-STRIP_TOP_MM), hi_ex(STRIP_TOP_MM))];
+const SEAM_RANGES: [Range; 3] =
+    [range(lo_in(0.0), of(1.0, "strip.length_mm", true)), range(lo_ex(-STRIP_TOP_MM), hi_ex(STRIP_TOP_MM)), POSITIVE];
+
+/// Substrate features need a windowed strip: the single model has its one `[bulge]`.
+fn windowed(s: &Scenario, rows: usize) -> Result<(), RowError> {
+    if rows > 0 && s.strip.window_mm == 0.0 {
+        return Err(RowError {
+            row: 0,
+            col: 0,
+            value: f64::NAN,
+            why: "must come with a windowed strip (strip.window_mm > 0): a single-model strip has its one [bulge]".into(),
+        });
+    }
+    Ok(())
+}
+
+fn bumps_on_the_strip(s: &Scenario) -> Result<(), RowError> {
+    windowed(s, s.substrate.bumps.len())?;
+    let l = s.strip.length_mm;
+    for (i, &[c, hw, _]) in s.substrate.bumps.iter().enumerate() {
+        if c - hw < 0.0 || c + hw > l {
+            return Err(RowError {
+                row: i,
+                col: 0,
+                value: c,
+                why: format!(
+                    "must lie on the strip: the bump spans {} to {} mm, beyond [0, {}] mm",
+                    fmt_num(c - hw),
+                    fmt_num(c + hw),
+                    fmt_num(l)
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+fn seams_apart(s: &Scenario) -> Result<(), RowError> {
+    windowed(s, s.substrate.seams.len())?;
+    let l = s.strip.length_mm;
+    let mut previous: Option<(usize, f64)> = None;
+    for (i, &[p, _, sm]) in s.substrate.seams.iter().enumerate() {
+        let (a, b) = (p - 0.5 * sm, p + 0.5 * sm);
+        if a < 0.0 || b > l {
+            return Err(RowError {
+                row: i,
+                col: 0,
+                value: p,
+                why: format!(
+                    "must lie on the strip: the seam's ramp spans {} to {} mm, beyond [0, {}] mm",
+                    fmt_num(a),
+                    fmt_num(b),
+                    fmt_num(l)
+                ),
+            });
+        }
+        if let Some((j, end)) = previous {
+            if a < end {
+                return Err(RowError { row: i, col: 0, value: p, why: format!("must not overlap the seam before it: its ramp starts at {} mm, seam {j}'s ends at {} mm (seams ascend along the strip)", fmt_num(a), fmt_num(end)) });
+            }
+        }
+        previous = Some((i, b));
+    }
+    Ok(())
+}
+
 /// Every field a scenario file may set, in the order of `scenarios/README.md`.
 pub static FIELDS: &[Field] = &[
     Field { key: "description", kind: Kind::Text, unit: "", range: ANY, rule: None, meaning: "Free text shown in summaries and recorded in the MCAP metadata." },
@@ -202,7 +303,11 @@ pub static FIELDS: &[Field] = &[
     num("robot.plant_inertia_scale", "", range(lo_ex(0.0), hi_in(10.0)), "Scale of every link and tool mass and inertia in the plant against the controller's model (1 = exact model; robustness studies)."),
     // [strip]
     flag("strip.enabled", "`false` runs the robot alone (no strip, no contact)."),
-    num("strip.length_mm", "mm", range(lo_in(8.0), hi_ex(1000.0)), "Strip length along task z (at least two of the largest elements, under 1 m)."),
+    with_rule(
+        num("strip.length_mm", "mm", range(lo_in(8.0), hi_in(MAX_STRIP_MM)), "Strip length along task z (at least two of the largest elements; a single model under 1 m, a windowed strip up to 5 m)."),
+        "under 1000 mm unless strip.window_mm > 0 (one reduced model of a longer strip grows with its length)",
+        |s| if s.strip.window_mm > 0.0 || s.strip.length_mm < 1000.0 { Ok(()) } else { Err(format!("strip.window_mm is 0 and the strip {} mm long", fmt_num(s.strip.length_mm))) },
+    ),
     num("strip.element_mm", "mm", range(lo_in(0.2), hi_in(4.0)), "Target hexahedron edge of the mesh."),
     num("strip.youngs_modulus_pa", "Pa", POSITIVE, "Young's modulus (the linearised Ogden fit of Section 4.1)."),
     num("strip.poisson", "", range(lo_ex(0.0), hi_ex(0.5)), "Poisson's ratio (0.4999 as in the thesis works: mean dilatation)."),
@@ -216,10 +321,47 @@ pub static FIELDS: &[Field] = &[
         "> 0 when strip.damping_alpha = 0 (balanced truncation needs a damped system)",
         |s| if s.strip.damping_alpha > 0.0 || s.strip.damping_beta > 0.0 { Ok(()) } else { Err("strip.damping_alpha is 0 too".into()) },
     ),
+    with_rule(
+        num("strip.window_mm", "mm", range(lo_in(0.0), of(1.0, "strip.length_mm", true)), "Length of one window of a long strip (issue 25): a chain of overlapping windows, each the reduced model of a strip this long, carries the strip; 0 = one model of the whole strip. No longer than the strip."),
+        "0 or a whole number of strip.element_mm (window nodes fall on the strip's)",
+        |s| {
+            let (w, h) = (s.strip.window_mm, s.strip.element_mm);
+            if w == 0.0 || whole(w, h) { Ok(()) } else { Err(format!("{} mm with {} mm elements", fmt_num(w), fmt_num(h))) }
+        },
+    ),
+    with_rule(
+        num("strip.window_spacing_mm", "mm", POSITIVE, "Distance between neighbouring windows' starts; the wheel's load hands over between window centres this far apart."),
+        "at most strip.window_mm / 4 and a whole number of strip.element_mm, when strip.window_mm > 0",
+        |s| {
+            let (w, sp, h) = (s.strip.window_mm, s.strip.window_spacing_mm, s.strip.element_mm);
+            if w == 0.0 || (sp <= 0.25 * w + 1e-9 && whole(sp, h) && whole(s.strip.length_mm - w, h)) {
+                Ok(())
+            } else {
+                Err(format!("window {} mm, spacing {} mm, strip {} mm, elements {} mm", fmt_num(w), fmt_num(sp), fmt_num(s.strip.length_mm), fmt_num(h)))
+            }
+        },
+    ),
     // [bulge]
     num("bulge.height_mm", "mm", range(lo_ex(-STRIP_TOP_MM), hi_ex(STRIP_TOP_MM)), "Peak height of the raised-cosine bump of the substrate under the strip (negative: a dip); less than the strip's 8 mm height at its centre."),
     num("bulge.half_width_mm", "mm", POSITIVE, "Half the bump's full width along the strip."),
     num("bulge.center_mm", "mm", range(lo_in(0.0), of(1.0, "strip.length_mm", true)), "Position of the bump's peak along the strip."),
+    // [substrate]
+    Field {
+        key: "substrate.bumps",
+        kind: Kind::Rows { cols: &["center_mm", "half_width_mm", "height_mm"], ranges: &BUMP_RANGES, rows: RowsRule { text: "lie on the strip (center_mm ± half_width_mm within [0, strip.length_mm]); only with strip.window_mm > 0", check: bumps_on_the_strip } },
+        unit: "mm",
+        range: ANY,
+        rule: None,
+        meaning: "Bumps and dips of the substrate along a windowed strip: raised cosines of this centre, half width and peak height (negative: a dip).",
+    },
+    Field {
+        key: "substrate.seams",
+        kind: Kind::Rows { cols: &["position_mm", "step_mm", "smoothing_mm"], ranges: &SEAM_RANGES, rows: RowsRule { text: "lie on the strip with their ramps (position_mm ± smoothing_mm / 2), ascending and not overlapping; only with strip.window_mm > 0", check: seams_apart } },
+        unit: "mm",
+        range: ANY,
+        rule: None,
+        meaning: "Seams between substrate panels along a windowed strip: the substrate steps by step_mm (negative: down) along a raised-cosine ramp smoothing_mm long centred on position_mm.",
+    },
     // [placement]
     num("placement.table_z_m", "m", range(lo_in(-REACH_M), hi_in(REACH_M)), "Base z of the table top (strip bottom); within 2 m of the base (the arm reaches 1.55 m)."),
     num("placement.strip_start_x_m", "m", range(lo_in(-REACH_M), hi_in(REACH_M)), "Base x of the strip's start (task z = 0)."),
@@ -461,6 +603,7 @@ impl Kind {
             Kind::Choice(_) => "string".into(),
             Kind::Floats(n) => format!("{n} numbers"),
             Kind::Points { .. } => "`[[z_mm, force_n], ...]`".into(),
+            Kind::Rows { cols, .. } => format!("`[[{}], ...]`", cols.join(", ")),
         }
     }
 }
@@ -475,6 +618,10 @@ impl Field {
             Kind::Choice(names) => format!("one of {}", names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")),
             Kind::Points { z, force } => {
                 format!("at most {MAX_FORCE_POINTS} points; z_mm in {}, strictly ascending; force_n in {}", z.text(), force.text())
+            }
+            Kind::Rows { cols, ranges, rows } => {
+                let each = cols.iter().zip(ranges).map(|(c, r)| format!("{c} in {}", r.text())).collect::<Vec<_>>().join("; ");
+                format!("at most {MAX_SUBSTRATE_FEATURES} rows; {each}; {}", rows.text)
             }
         };
         match self.rule {

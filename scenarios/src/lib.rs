@@ -132,6 +132,8 @@ pub struct Scenario {
     pub robot: RobotConfig,
     pub strip: StripConfig,
     pub bulge: BulgeConfig,
+    /// Bumps, dips and seams along a windowed (long) strip (issue 25); empty by default.
+    pub substrate: SubstrateConfig,
     pub placement: PlacementConfig,
     pub contact: ContactConfig,
     pub trajectory: TrajectoryConfig,
@@ -348,6 +350,13 @@ pub struct StripConfig {
     /// Rayleigh damping B = alpha M + beta K (5.24).
     pub damping_alpha: f64,
     pub damping_beta: f64,
+    /// Length of one window of a long strip, mm (issue 25): the strip is carried by a chain of
+    /// overlapping windows, each the reduced model of a strip this long. 0 = one model of the
+    /// whole strip (today's; the default).
+    pub window_mm: f64,
+    /// Distance between neighbouring windows' starts, mm (at most a quarter of `window_mm`, so
+    /// the wheel stays a quarter window off the ends of the windows that carry it).
+    pub window_spacing_mm: f64,
 }
 
 impl Default for StripConfig {
@@ -364,6 +373,8 @@ impl Default for StripConfig {
             cutoff_hz: 2500.0,
             damping_alpha: 60.0,
             damping_beta: 3e-6,
+            window_mm: 0.0,
+            window_spacing_mm: 10.0,
         }
     }
 }
@@ -381,6 +392,22 @@ impl Default for BulgeConfig {
     fn default() -> Self {
         Self { height_mm: 0.2, half_width_mm: 10.0, center_mm: 20.0 }
     }
+}
+
+/// Most rows `substrate.bumps` (and `substrate.seams`) may hold.
+pub const MAX_SUBSTRATE_FEATURES: usize = 64;
+
+/// The substrate along a windowed strip (issue 25): every bump or dip and every seam between two
+/// panels, each a static offset of the linear model. Only a windowed strip (`strip.window_mm` >
+/// 0) takes them; the single-model strip has its one `[bulge]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct SubstrateConfig {
+    /// `[[center_mm, half_width_mm, height_mm], ...]`: raised-cosine bumps (negative height: dips).
+    pub bumps: Vec<[f64; 3]>,
+    /// `[[position_mm, step_mm, smoothing_mm], ...]`: the substrate steps by `step_mm` (negative:
+    /// down) along a raised-cosine ramp `smoothing_mm` long centred on `position_mm`.
+    pub seams: Vec<[f64; 3]>,
 }
 
 /// Where the strip lies in the robot base frame (DESIGN section 3).
@@ -691,5 +718,56 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("must have at most 32 points"), "{e}");
+    }
+
+    #[test]
+    fn long_strip_substrate_is_read_and_its_bad_rows_are_named_with_file_line_and_field() {
+        let ok = "[strip]\nlength_mm = 600\nwindow_mm = 40\nwindow_spacing_mm = 10\n\n[trajectory]\nz_end_mm = 590\nroll_s = 10\n\n\
+                  [substrate]\nbumps = [[100, 10, 0.2], [250, 15, -0.3]]\nseams = [[300, 0.3, 4], [400, -0.3, 4]]\n";
+        let s = Scenario::from_toml_str(ok, Path::new("long.toml")).unwrap();
+        assert_eq!(s.substrate.bumps, vec![[100.0, 10.0, 0.2], [250.0, 15.0, -0.3]]);
+        assert_eq!(s.substrate.seams[1], [400.0, -0.3, 4.0]);
+        let head = "[strip]\nlength_mm = 600\nwindow_mm = 40\n\n[trajectory]\nz_end_mm = 590\nroll_s = 10\n\n[substrate]\n";
+        for (body, line, field, value, why) in [
+            // a bulge beyond the strip (its second row, on line 11)
+            (
+                "bumps = [\n  [100, 10, 0.2],\n  [595, 10, 0.2],\n]\n",
+                12,
+                "substrate.bumps[1] center_mm",
+                "595",
+                "must lie on the strip: the bump spans 585 to 605 mm",
+            ),
+            // overlapping seams
+            (
+                "seams = [\n  [300, 0.3, 4],\n  [302, 0.3, 4],\n]\n",
+                12,
+                "substrate.seams[1] position_mm",
+                "302",
+                "must not overlap the seam before it",
+            ),
+            // a seam before the one above it in the list
+            ("seams = [[300, 0.3, 4], [200, 0.3, 4]]\n", 10, "substrate.seams[1] position_mm", "200", "must not overlap"),
+        ] {
+            let e = Scenario::from_toml_str(&format!("{head}{body}"), Path::new("x/long.toml")).unwrap_err();
+            let msg = e.to_string();
+            assert_eq!(e.field(), Some(field), "{msg}");
+            assert_eq!(e.place(), Some(Place::Line(line)), "{msg}");
+            assert!(msg.starts_with("scenario file x/long.toml") && msg.contains(&format!("= {value}: {why}")), "{msg}");
+        }
+        // a window longer than the strip
+        let e = Scenario::from_toml_str("[strip]\nwindow_mm = 50\n", Path::new("x/w.toml")).unwrap_err();
+        let msg = e.to_string();
+        assert_eq!((e.field(), e.place()), (Some("strip.window_mm"), Some(Place::Line(2))), "{msg}");
+        assert!(
+            msg.contains("x/w.toml") && msg.contains("field strip.window_mm = 50: must be in [0, strip.length_mm] = [0, 40] mm"),
+            "{msg}"
+        );
+        // substrate features need a windowed strip; a long strip needs windows
+        let e = Scenario::from_toml_str("[substrate]\nbumps = [[20, 5, 0.1]]\n", Path::new("t.toml")).unwrap_err();
+        assert_eq!((e.field(), e.place()), (Some("substrate.bumps"), Some(Place::Line(2))), "{e}");
+        let e = Scenario::from_toml_str("[strip]\nlength_mm = 1500\n", Path::new("t.toml")).unwrap_err();
+        assert_eq!(e.field(), Some("strip.length_mm"), "{e}");
+        let e = Scenario::from_toml_str("[strip]\nwindow_mm = 40\nwindow_spacing_mm = 12\n", Path::new("t.toml")).unwrap_err();
+        assert_eq!((e.field(), e.place()), (Some("strip.window_spacing_mm"), Some(Place::Line(3))), "{e}");
     }
 }

@@ -122,6 +122,28 @@ fn bad_values(f: &Field) -> Vec<(String, String, usize)> {
                 out.push(second(&format!("[4, {}]", toml_num(bad)), "force_n"));
             }
         }
+        Kind::Rows { cols, ranges, .. } => {
+            out.extend(["3", "\"x\""].map(plain));
+            out.push(("[1, 2]".into(), format!("{key}[0]"), 0));
+            // a valid first row, the bad one on a line of its own two lines below the key
+            let second = |row: &str, which: &str| {
+                let name = if which.is_empty() { format!("{key}[1]") } else { format!("{key}[1] {which}") };
+                (format!("[\n  [1, 1, 1],\n  {row},\n]"), name, 2)
+            };
+            out.extend([second("\"x\"", ""), second("[4]", ""), second("[1, 1, 1, 1]", ""), second("[1, \"x\", 1]", "")]);
+            for (c, col) in cols.iter().enumerate() {
+                for bad in ["nan", "inf"] {
+                    let mut row = vec!["1"; cols.len()];
+                    row[c] = bad;
+                    out.push(second(&format!("[{}]", row.join(", ")), col));
+                }
+                for (bad, _) in around_ends(&ranges[c], false) {
+                    let mut row = vec!["1".to_string(); cols.len()];
+                    row[c] = toml_num(bad);
+                    out.push(second(&format!("[{}]", row.join(", ")), col));
+                }
+            }
+        }
     }
     out
 }
@@ -146,6 +168,7 @@ fn the_table_lists_every_field_of_the_scenario_once() {
     for f in FIELDS {
         let ranges: Vec<Range> = match f.kind {
             Kind::Points { z, force } => vec![z, force],
+            Kind::Rows { ranges, .. } => ranges.to_vec(),
             _ => vec![f.range],
         };
         for r in ranges {

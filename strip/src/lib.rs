@@ -9,6 +9,7 @@
 pub mod bt;
 pub mod cache;
 pub mod cb;
+pub mod chain;
 pub mod cli;
 pub mod eig;
 pub mod error;
