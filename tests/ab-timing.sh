@@ -3,9 +3,9 @@
 #
 #   tests/ab-timing.sh [-n PAIRS] [-s SECONDS] REV [-- EXTRA rig timing FLAGS]
 #
-# A is REV built in release in a temporary git worktree (its own target directory, kept in
-# ${AB_CACHE:-$HOME/.cache/rig-ab}/<commit> so a second comparison against the same revision
-# does not rebuild); B is this working tree, built in release here. The pairs alternate their
+# A is REV built in release in a git worktree kept with its target directory in
+# ${AB_CACHE:-$HOME/.cache/rig-ab}/<commit> (so a second comparison against the same revision
+# does not rebuild, and A's binaries still find their scenarios); B is this working tree, built in release here. The pairs alternate their
 # order (A B, B A, A B, ...) so a drift of the host's load hits both sides alike. Each run's
 # summary JSON (`rig timing --json`) is kept in the output directory; at the end the script
 # prints, per side, the median over the runs of the round trip p50/p90/p99, the tick-period
@@ -42,14 +42,16 @@ cache=${AB_CACHE:-$HOME/.cache/rig-ab}/$commit
 out=$(mktemp -d "${TMPDIR:-/tmp}/ab-timing.XXXXXX")
 echo "A = $rev ($commit), B = working tree of $root; $pairs pairs of ${seconds} s; results in $out"
 
-# A: the revision, in a temporary worktree (removed again), built into the cache.
-if [[ ! -x $cache/release/rig ]]; then
-    wt=$(mktemp -d "${TMPDIR:-/tmp}/ab-wt.XXXXXX")
-    trap 'git -C "$root" worktree remove --force "$wt" 2>/dev/null || true' EXIT
-    git -C "$root" worktree add --detach "$wt" "$commit" >/dev/null
+# A: the revision, checked out in the cache beside its target directory and kept there: its
+# binaries find the scenarios by the absolute path they were built in.
+src=$cache/src
+if [[ ! -x $cache/release/rig || ! -d $src/scenarios ]]; then
     mkdir -p "$cache"
-    echo "building A in $wt (target $cache) ..."
-    (cd "$wt" && CARGO_TARGET_DIR=$cache cargo build --release --workspace --bins -q)
+    git -C "$root" worktree remove --force "$src" 2>/dev/null || rm -rf "$src"
+    git -C "$root" worktree prune
+    git -C "$root" worktree add --detach "$src" "$commit" >/dev/null
+    echo "building A in $src (target $cache) ..."
+    (cd "$src" && CARGO_TARGET_DIR=$cache cargo build --release --workspace --bins -q)
 fi
 echo "building B ..."
 (cd "$root" && cargo build --release --workspace --bins -q)
