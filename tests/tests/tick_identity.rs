@@ -20,8 +20,8 @@ use recording_tools::read::Recording;
 
 const EXPECTED: [(&str, &str); 3] = [
     ("default", "f21387fcad1a39dd (3600 states, 3600 wrenches, 3600 torques, 3600 strip records)"),
-    ("thesis", "87fa87a0567b2ddb (3600 states, 3600 wrenches, 3600 torques, 3600 strip records)"),
-    ("bond_scheduled", "f3e2c1842b141848 (3600 states, 3600 wrenches, 3600 torques, 3600 strip records)"),
+    ("thesis", "4b41f2936126cfe4 (3600 states, 3600 wrenches, 3600 torques, 3600 strip records)"),
+    ("bond_scheduled", "1cf94db8edb7b071 (3600 states, 3600 wrenches, 3600 torques, 3600 strip records)"),
 ];
 
 fn scenario_path(name: &str) -> std::path::PathBuf {
