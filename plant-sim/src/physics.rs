@@ -3,9 +3,9 @@
 //! wrench the tool exerts on the strip; the contact hands over its opposite, the wrench on the
 //! tool W = −F_e, which enters as `+Jᵀ W` (messages/README.md, "Frames and signs").
 //!
-//! Integrator: `loop.substeps` equal substeps per tick (default 10, i.e. 100 µs at 1 kHz), each
+//! Integrator: `loop.substeps` equal substeps per tick (default 8, i.e. 125 µs at 1 kHz), each
 //! one step of `loop.integrator` on `(q, q̇)`: explicit midpoint (second-order Runge–Kutta, the
-//! default, 2 forward-dynamics calls) or classic fourth-order Runge–Kutta (4 calls). The torque
+//! default; one mass matrix, bias and factor per substep: see `midpoint`) or classic fourth-order Runge–Kutta (4 calls). The torque
 //! is held constant over the tick (zero-order hold, as a real drive applies the controller's
 //! command). Within a tick nothing in the robot is stiff: the controller acts only between ticks,
 //! friction is viscous and small, and the contact acts through the shoulder and elbow (large
