@@ -404,3 +404,51 @@ impl ChainContact {
         r.n_centreline = 0;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::tests::coarse;
+    use scenarios::Scenario;
+
+    /// TCP (wheel centre) position and tool-down orientation for the wheel's lowest point at task (z, y).
+    fn tcp_at(g: &ContactGeometry, z: f64, y_low: f64) -> (Vector3<f64>, Matrix3<f64>) {
+        let p = g.task.point_to_base(&Vector3::new(0.0, y_low + g.wheel_radius_m, z));
+        let pose = robot::tool_down_pose(p.x, p.y, p.z);
+        (pose.translation.vector, pose.rotation.to_rotation_matrix().into_inner())
+    }
+
+    /// The wheel held at a fixed depth on a 60 mm chain of 20 mm windows, at a hand-over point,
+    /// halfway between two and just before one: the steady force solves p = k (depth − C_s p)
+    /// with C_s the chain's static compliance under the wheel from `strip::chain::ChainStatics`
+    /// (the window model's DC gain, independent of the contact's tables); the bottom force
+    /// balances the wheel's and the surface sits where the penalty spring says.
+    #[test]
+    fn static_press_on_the_chain_matches_the_chain_statics() {
+        let model = coarse();
+        let (ls, lw, sp, el) = (0.06, 0.02, 0.004, 0.002);
+        let chain = WindowChain::new(ls, lw, sp, el).unwrap();
+        let statics = strip::chain::ChainStatics::new(coarse(), chain.clone()).unwrap();
+        let tables = Arc::new(StripTables::new(&model, 1e-4));
+        let g = ContactGeometry::from_scenario(&Scenario::default());
+        let depth = 0.2e-3;
+        for z in [chain.centre_m(3), 0.5 * (chain.centre_m(3) + chain.centre_m(4)), chain.centre_m(5) - 0.0013] {
+            let mut c = ChainContact::new(tables.clone(), chain.clone(), ChainSubstrate::flat(&chain, el), g).unwrap();
+            let (pos, rot) = tcp_at(&g, z, STRIP_TOP_HEIGHT_M - depth);
+            for _ in 0..6000 {
+                c.substep(&pos, &rot, &Vec6::zeros());
+            }
+            let c_s = statics.wheel(z, 1.0).wheel_uy_m;
+            let k = g.stiffness_n_per_m;
+            let p_expect = k * depth / (1.0 + k * c_s);
+            let p = -c.contact_force_n();
+            let mut r = StripRecord::default();
+            c.fill_record(&mut r);
+            eprintln!("z {:.2} mm: p {p:.5} N, statics {p_expect:.5} N, bottom {:.5} N", z * 1e3, r.bottom_force_n);
+            assert!((p - p_expect).abs() < 1e-4 * p_expect, "z {z}: p = {p}, expected {p_expect}");
+            assert!((r.bottom_force_n + p).abs() < 1e-4 * p, "bottom {} vs contact {}", r.bottom_force_n, -p);
+            assert!((k * (STRIP_TOP_HEIGHT_M + r.top_displacement_m - (STRIP_TOP_HEIGHT_M - depth)) - p).abs() < 1e-6 * p);
+            assert!(r.max_bottom_pressure_pa > 0.0);
+        }
+    }
+}
