@@ -36,9 +36,6 @@ use super::{dot, ContactGeometry, StripContact, StripTables, WrenchOnTool, TABLE
 /// Window slots of the pool: two share the wheel's load, one relaxes behind them.
 pub const POOL: usize = 3;
 
-/// Longest centre line the per-layer pressure buffer holds (layers of the pool's span).
-const MAX_SPAN_LAYERS: usize = 512;
-
 /// One slot of the pool: the window it holds (`usize::MAX`: none) and its modal state.
 #[derive(Clone, Debug)]
 struct Slot {
@@ -160,7 +157,8 @@ impl ChainContact {
             tables.cl_rows.len()
         );
         let span = chain.window_length_m + 2.0 * chain.offsets_m.get(1).copied().unwrap_or(0.0);
-        anyhow::ensure!((span / element_m) as usize + 1 <= MAX_SPAN_LAYERS, "window span too long for the pressure buffer");
+        // the pool's centre line goes through the record's per-tick buffer (`fill_record`)
+        anyhow::ensure!(((span / element_m).round() as usize) < recordings::MAX_CENTRELINE, "window span too long for the pressure buffer");
         let slot = Slot { window: usize::MAX, x: vec![0.0; 2 * tables.modes], live: false };
         Ok(ChainContact {
             geo,
