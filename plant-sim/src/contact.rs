@@ -40,6 +40,8 @@ use strip::{CbBoundary, StripModel, StripParams, Substrate};
 
 use scenarios::geometry::{TaskFrame, STRIP_TOP_HEIGHT_M};
 
+pub mod chain;
+
 /// z_a grid spacing of the wheel-direction table, m.
 pub const TABLE_STEP_M: f64 = 0.05e-3;
 
@@ -679,12 +681,18 @@ impl StripContact {
     /// wheel centre) at `tcp_pos` with tool orientation `rot`; the wheel axis is the tool y axis.
     #[inline]
     fn lowest_point(&self, tcp_pos: &Vector3<f64>, rot: &Matrix3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        Self::lowest_point_of(&self.geo, tcp_pos, rot)
+    }
+
+    /// [`StripContact::lowest_point`] for a wheel of geometry `geo` (the chain's contact too).
+    #[inline]
+    fn lowest_point_of(geo: &ContactGeometry, tcp_pos: &Vector3<f64>, rot: &Matrix3<f64>) -> (Vector3<f64>, Vector3<f64>) {
         let axis = rot.column(1).into_owned();
         let down = -Vector3::z();
         let in_plane = down - axis * axis.dot(&down);
         let n = in_plane.norm();
         let d = if n > 1e-9 { in_plane / n } else { down };
-        (tcp_pos + d * self.geo.wheel_radius_m, d)
+        (tcp_pos + d * geo.wheel_radius_m, d)
     }
 
     /// One substep: contact force from the wheel state at the substep start (TCP = wheel centre

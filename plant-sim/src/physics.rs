@@ -59,14 +59,44 @@ pub fn strip_tables(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Option<Arc
     if !s.strip.enabled {
         return Ok(None);
     }
-    not_windowed(s)?;
-    let params = crate::contact::strip_params(s).with_reference_bulge();
+    not_sliding_windows(s)?;
+    tables_of(&model_params(s), substep_s(s), cache_dir).map(Some)
+}
+
+/// The reduced model the plant steps for a scenario's strip: the whole strip, or one window of
+/// a windowed strip (`window_params`).
+fn model_params(s: &Scenario) -> strip::StripParams {
+    if s.strip.window_mm > 0.0 {
+        window_params(s)
+    } else {
+        crate::contact::strip_params(s)
+    }
+}
+
+/// One window of a windowed strip (issue 25): the scenario's strip `strip.window_mm` long. Its
+/// bump (placed at the window's centre, half the window wide: for 40 mm windows the default
+/// strip's, so the two share a cached model) is not used: the chain's substrate carries the
+/// scenario's bumps, dips and seams.
+pub fn window_params(s: &Scenario) -> strip::StripParams {
+    let l = s.strip.window_mm * 1e-3;
+    strip::StripParams {
+        length_m: l,
+        bulge_center_m: 0.5 * l,
+        bulge_width_m: 0.5 * l,
+        bulge_amplitude_m: strip::StripParams::BULGE_REFERENCE_M,
+        ..crate::contact::strip_params(s)
+    }
+}
+
+/// The contact tables of the model `params` at its reference bump and substep `h_s`: from the
+/// on-disk cache, else built (the model loaded or built in `cache_dir`) and cached.
+fn tables_of(params: &strip::StripParams, h_s: f64, cache_dir: &Path) -> anyhow::Result<Arc<StripTables>> {
+    let params = params.with_reference_bulge();
     let t0 = std::time::Instant::now();
-    let h_s = substep_s(s);
     let path = crate::table_cache::path(cache_dir, &params, h_s);
     if let Some(t) = crate::table_cache::load(&path, &params, h_s) {
         tracing::info!(load_ms = t0.elapsed().as_secs_f64() * 1e3, "contact tables loaded from {}", path.display());
-        return Ok(Some(Arc::new(t)));
+        return Ok(Arc::new(t));
     }
     let model =
         strip::StripModel::load_or_build_in(cache_dir, &params).with_context(|| format!("strip model (cache {})", cache_dir.display()))?;
@@ -81,7 +111,28 @@ pub fn strip_tables(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Option<Arc
         tables_ms = (t0.elapsed() - t_model).as_secs_f64() * 1e3,
         "strip model loaded, contact tables built and cached"
     );
-    Ok(Some(Arc::new(tables)))
+    Ok(Arc::new(tables))
+}
+
+/// The chain contact of a windowed scenario on the window's `tables`: the chain of windows and
+/// the substrate's static offsets (solved on the window's full FE model; a flat substrate needs
+/// none).
+fn chain_contact(s: &Scenario, tables: Arc<StripTables>) -> anyhow::Result<crate::contact::chain::ChainContact> {
+    use crate::contact::chain::{substrate_profile, ChainContact, ChainSubstrate};
+    let st = &s.strip;
+    let chain = strip::chain::WindowChain::new(st.length_mm * 1e-3, st.window_mm * 1e-3, st.window_spacing_mm * 1e-3, st.element_mm * 1e-3)
+        .context("the window chain of the long strip")?;
+    let profile = substrate_profile(s);
+    let substrate = if profile.features.is_empty() {
+        ChainSubstrate::flat(&chain, st.element_mm * 1e-3)
+    } else {
+        let t0 = std::time::Instant::now();
+        let full = strip::chain::FullStatics::build(&window_params(s)).context("the window's full FE model (substrate offsets)")?;
+        let sub = ChainSubstrate::new(&tables, &chain, &full, &profile);
+        tracing::info!(ms = t0.elapsed().as_secs_f64() * 1e3, windows = chain.len(), "substrate offsets of the long strip solved");
+        sub
+    };
+    ChainContact::new(tables, chain, substrate, crate::contact::ContactGeometry::from_scenario(s))
 }
 
 /// (sin, cos) of `q + dq` from those of `q` (`sc`) by the angle sums, with sin and cos of the
@@ -118,8 +169,10 @@ pub struct Physics {
     time_s: f64,
     /// Where the strip lies, for the recorded wheel position without the strip.
     task: TaskFrame,
-    /// Strip + wheel contact (`contact.rs`); None when `strip.enabled = false`.
+    /// Strip + wheel contact (`contact.rs`); None when `strip.enabled = false` or windowed.
     contact: Option<crate::contact::StripContact>,
+    /// The windowed long strip's contact (`contact::chain`); None unless `strip.window_mm > 0`.
+    chain: Option<crate::contact::chain::ChainContact>,
     /// End stops and drive torque–speed limits, applied inside every integrator stage.
     limits: crate::limits::JointLimits,
     /// `[drives]`: friction with stiction and torque-constant errors (None: ideal drives).
@@ -129,13 +182,13 @@ pub struct Physics {
     lagged: Option<(robot::dynamics::MassFactor, Vec6)>,
 }
 
-/// A windowed (long) strip (issue 25, `strip.window_mm` > 0) is validated in statics
-/// (`strip::chain`) but its dynamics are not in the plant yet: refuse it rather than build one
-/// reduced model of the whole length.
-fn not_windowed(s: &Scenario) -> anyhow::Result<()> {
+/// A windowed (long) strip (issue 25, `strip.window_mm` > 0) is carried by the chain of windows
+/// (`contact::chain`), built and validated for the bonded substrate only: a sliding bottom
+/// carries load much farther along the strip than a window reaches (`strip::chain`).
+fn not_sliding_windows(s: &Scenario) -> anyhow::Result<()> {
     anyhow::ensure!(
-        !s.strip.enabled || s.strip.window_mm == 0.0,
-        "strip.window_mm = {} mm: the windowed long strip (issue 25) is not wired into the plant yet; only its statics exist (strip::chain)",
+        !s.strip.enabled || s.strip.window_mm == 0.0 || s.strip.boundary != "sliding",
+        "strip.window_mm = {} mm with strip.boundary = \"sliding\": the windowed long strip (issue 25) holds for the bonded substrate only (a sliding bottom carries load farther than a window reaches)",
         s.strip.window_mm
     );
     Ok(())
@@ -153,9 +206,19 @@ impl Physics {
     /// (`contact::strip_params(s).with_reference_bulge()`) and substep; this plant scales their
     /// bump to the scenario's height. None without the strip.
     pub fn with_strip_tables(s: &Scenario, tables: Option<Arc<StripTables>>) -> anyhow::Result<Physics> {
-        not_windowed(s)?;
+        not_sliding_windows(s)?;
         anyhow::ensure!(tables.is_some() == s.strip.enabled, "strip tables are needed exactly when strip.enabled");
+        let mut chain = None;
         let contact = match tables {
+            Some(tables) if s.strip.window_mm > 0.0 => {
+                anyhow::ensure!(
+                    *tables.params() == window_params(s) && tables.substep_s() == substep_s(s),
+                    "the strip tables are not the scenario's window (substep {} s)",
+                    substep_s(s)
+                );
+                chain = Some(chain_contact(s, tables)?);
+                None
+            }
             Some(tables) => {
                 let params = crate::contact::strip_params(s);
                 anyhow::ensure!(
@@ -188,6 +251,7 @@ impl Physics {
             time_s: 0.0,
             task: TaskFrame::from_scenario(s),
             contact,
+            chain,
         })
     }
 
@@ -259,7 +323,11 @@ impl Physics {
     /// Force of the wheel on the strip along task y, N: F_e's task-y component, negative when
     /// pressing (0 without a strip).
     pub fn contact_force_n(&self) -> f64 {
-        self.contact.as_ref().map_or(0.0, |c| c.contact_force_n())
+        match (&self.contact, &self.chain) {
+            (Some(c), _) => c.contact_force_n(),
+            (None, Some(c)) => c.contact_force_n(),
+            (None, None) => 0.0,
+        }
     }
 
     /// Advance one tick with the joint torque `tau` (N m) held constant: `substeps` steps of the
@@ -283,7 +351,16 @@ impl Physics {
                     let w = c.substep(&p, &frames.rot[6], &(jac * qd));
                     jac.transpose() * w.as_vec6()
                 }
-                None => Vec6::zeros(),
+                None => match self.chain.as_mut() {
+                    Some(c) => {
+                        let frames = self.robot.frames_from_sin_cos(&sc);
+                        let p = self.robot.tcp_position(&frames);
+                        let jac = self.robot.jacobian_point(&frames, &p);
+                        let w = c.substep(&p, &frames.rot[6], &(jac * qd));
+                        jac.transpose() * w.as_vec6()
+                    }
+                    None => Vec6::zeros(),
+                },
             };
             let tau = &(*tau_cmd, tau_ext);
             (self.q, self.qd) = match self.integrator {
@@ -339,18 +416,24 @@ impl Physics {
     /// End-effector wrench the strip exerts on the tool (−F_e), as the sensor reports it
     /// ([`messages::WrenchFrame::SensorAtTcp`]): `(force N, torque N m)`. Zero without contact.
     pub fn wrench_on_tool(&self) -> ([f64; 3], [f64; 3]) {
-        match &self.contact {
-            Some(c) => c.wrench_on_tool_sensor(&self.robot.frames(&self.q).rot[6]),
-            None => ([0.0; 3], [0.0; 3]),
+        match (&self.contact, &self.chain) {
+            (Some(c), _) => c.wrench_on_tool_sensor(&self.robot.frames(&self.q).rot[6]),
+            (None, Some(c)) => c.wrench_on_tool_sensor(&self.robot.frames(&self.q).rot[6]),
+            (None, None) => ([0.0; 3], [0.0; 3]),
         }
     }
 
     /// True while the wheel touches the strip.
     pub fn in_contact(&self) -> bool {
-        self.contact.as_ref().is_some_and(|c| c.in_contact())
+        self.contact.as_ref().is_some_and(|c| c.in_contact()) || self.chain.as_ref().is_some_and(|c| c.in_contact())
     }
 
-    /// The strip contact, if the scenario has a strip (centre-line z for the recording metadata).
+    /// The windowed long strip's contact, if the scenario has one.
+    pub fn chain(&self) -> Option<&crate::contact::chain::ChainContact> {
+        self.chain.as_ref()
+    }
+
+    /// The strip contact, if the scenario has a single-model strip (centre-line z for the recording metadata).
     pub fn contact(&self) -> Option<&crate::contact::StripContact> {
         self.contact.as_ref()
     }
@@ -359,6 +442,10 @@ impl Physics {
     /// the strip (the TCP's task z) and zero forces.
     pub fn fill_strip_record(&self, r: &mut recordings::StripRecord) {
         if let Some(c) = &self.contact {
+            c.fill_record(r);
+            return;
+        }
+        if let Some(c) = &self.chain {
             c.fill_record(r);
             return;
         }
@@ -383,14 +470,15 @@ mod tests {
     }
 
     #[test]
-    fn a_windowed_strip_is_refused_before_any_model_is_built() {
-        // issue 25: only the statics of the window chain exist; a 600 mm strip must not be built
-        // as one reduced model (the cache directory does not exist: nothing may be written)
+    fn a_windowed_strip_on_a_sliding_substrate_is_refused_before_any_model_is_built() {
+        // issue 25: the chain of windows holds for the bonded bottom only (the cache directory
+        // does not exist: nothing may be written)
         let mut s = Scenario::default();
         s.strip.length_mm = 600.0;
         s.strip.window_mm = 40.0;
+        s.strip.boundary = "sliding".into();
         let e = Physics::new(&s, Path::new("/nonexistent/strip-cache")).err().expect("refused").to_string();
-        assert!(e.contains("strip.window_mm = 40 mm") && e.contains("not wired into the plant"), "{e}");
+        assert!(e.contains("strip.window_mm = 40 mm") && e.contains("bonded substrate only"), "{e}");
     }
 
     #[test]

@@ -427,47 +427,53 @@ pub struct LongOffsets {
 }
 
 impl ChainStatics {
-    /// The substrate's static offsets along the whole strip. Unlike the wheel's load, a
-    /// substrate shape is not local (a seam lifts everything after it), so it is not shared out:
-    /// every window holds the whole profile under its own bottom face, solved exactly on the
-    /// window's full FE model (`window_full`, built with the window's parameters), and the
-    /// outputs are blended in space by the same partition of unity: the output at z is
-    /// sum_k phi_k(z) y_k(z). Only windows whose centre is within one spacing of z contribute, so
-    /// z is a quarter window from their ends; a uniform lift is then exact (a rigid translation
-    /// of every window), and a local shape is exact up to what lies beyond those ends.
+    /// The substrate's static offsets along the whole strip ([`substrate_offsets`] of this chain).
     pub fn substrate_offsets(&self, window_full: &FullStatics, profile: &SubstrateProfile) -> LongOffsets {
-        let layers_w = (self.chain.window_length_m / self.element_m).round() as usize + 1;
-        let top_per = window_full.top_xyz_m.len() / layers_w;
-        let bot_per = self.bottom_per_layer;
-        let mut out = LongOffsets { top_uy_m: vec![0.0; top_per * self.layers()], bottom_reaction_n: vec![0.0; bot_per * self.layers()] };
-        let bottom_z: Vec<f64> = window_full.sys.bottom_nodes.iter().map(|&n| window_full.sys.mesh.coords[n][2]).collect();
-        let zero_top = vec![0.0; window_full.top_xyz_m.len()];
-        let phi = |k: usize, z: f64| {
-            let s = self.chain.share(z);
-            if s.first == k {
-                s.weight[0]
-            } else if s.first + 1 == k {
-                s.weight[1]
-            } else {
-                0.0
-            }
-        };
-        for (k, &o) in self.chain.offsets_m.iter().enumerate() {
-            let q: Vec<f64> = bottom_z.iter().map(|&z| profile.height_m(z + o)).collect();
-            if q.iter().all(|&v| v == 0.0) {
-                continue;
-            }
-            let y = window_full.solve(&zero_top, Some(&q));
-            let first = (o / self.element_m).round() as usize;
-            for (i, v) in y.top_uy_m.iter().enumerate() {
-                out.top_uy_m[first * top_per + i] += phi(k, o + (i / top_per) as f64 * self.element_m) * v;
-            }
-            for (i, v) in y.bottom_reaction_n.iter().enumerate() {
-                out.bottom_reaction_n[first * bot_per + i] += phi(k, o + (i / bot_per) as f64 * self.element_m) * v;
-            }
-        }
-        out
+        substrate_offsets(&self.chain, self.element_m, window_full, profile)
     }
+}
+
+/// The substrate's static offsets along the whole strip of `chain` (mesh `element_m`). Unlike
+/// the wheel's load, a substrate shape is not local (a seam lifts everything after it), so it is
+/// not shared out: every window holds the whole profile under its own bottom face, solved
+/// exactly on the window's full FE model (`window_full`, built with the window's parameters),
+/// and the outputs are blended in space by the same partition of unity: the output at z is
+/// sum_k phi_k(z) y_k(z). Only windows whose centre is within one spacing of z contribute, so
+/// z is a quarter window from their ends; a uniform lift is then exact (a rigid translation of
+/// every window), and a local shape is exact up to what lies beyond those ends.
+pub fn substrate_offsets(chain: &WindowChain, element_m: f64, window_full: &FullStatics, profile: &SubstrateProfile) -> LongOffsets {
+    let layers_w = (chain.window_length_m / element_m).round() as usize + 1;
+    let layers = (chain.strip_length_m / element_m).round() as usize + 1;
+    let top_per = window_full.top_xyz_m.len() / layers_w;
+    let bot_per = window_full.sys.bottom_nodes.len() / layers_w;
+    let mut out = LongOffsets { top_uy_m: vec![0.0; top_per * layers], bottom_reaction_n: vec![0.0; bot_per * layers] };
+    let bottom_z: Vec<f64> = window_full.sys.bottom_nodes.iter().map(|&n| window_full.sys.mesh.coords[n][2]).collect();
+    let zero_top = vec![0.0; window_full.top_xyz_m.len()];
+    let phi = |k: usize, z: f64| {
+        let s = chain.share(z);
+        if s.first == k {
+            s.weight[0]
+        } else if s.first + 1 == k {
+            s.weight[1]
+        } else {
+            0.0
+        }
+    };
+    for (k, &o) in chain.offsets_m.iter().enumerate() {
+        let q: Vec<f64> = bottom_z.iter().map(|&z| profile.height_m(z + o)).collect();
+        if q.iter().all(|&v| v == 0.0) {
+            continue;
+        }
+        let y = window_full.solve(&zero_top, Some(&q));
+        let first = (o / element_m).round() as usize;
+        for (i, v) in y.top_uy_m.iter().enumerate() {
+            out.top_uy_m[first * top_per + i] += phi(k, o + (i / top_per) as f64 * element_m) * v;
+        }
+        for (i, v) in y.bottom_reaction_n.iter().enumerate() {
+            out.bottom_reaction_n[first * bot_per + i] += phi(k, o + (i / bot_per) as f64 * element_m) * v;
+        }
+    }
+    out
 }
 
 #[cfg(test)]
