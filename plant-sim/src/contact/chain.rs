@@ -288,6 +288,18 @@ impl ChainContact {
         (1.0 - s) * v[g] + s * v[g + 1]
     }
 
+    /// Window `k`'s share of the wheel's load (the chain's smooth weight; 0 for a window the
+    /// wheel is not over).
+    fn weight_of(&self, k: usize) -> f64 {
+        if k == self.share.first {
+            self.share.weight[0]
+        } else if k == self.share.first + 1 {
+            self.share.weight[1]
+        } else {
+            0.0
+        }
+    }
+
     /// Wrench of the last substep on the tool as the sensor reports it (see [`StripContact`]).
     pub fn wrench_on_tool_sensor(&self, rot_base_tool: &Matrix3<f64>) -> ([f64; 3], [f64; 3]) {
         let rt = rot_base_tool.transpose();
@@ -329,13 +341,7 @@ impl ChainContact {
         for s in self.slots.iter().filter(|s| s.window != usize::MAX) {
             let k = s.window;
             let first = layer_of(self.chain.offsets_m[k]) - lo;
-            let phi = if k == self.share.first {
-                self.share.weight[0]
-            } else if k == self.share.first + 1 {
-                self.share.weight[1]
-            } else {
-                0.0
-            };
+            let phi = self.weight_of(k);
             let (g, sf) = t.locate(self.z_a_m - self.chain.offsets_m[k]);
             let (d0, d1) = (&t.d_cl[g * n_cl..(g + 1) * n_cl], &t.d_cl[(g + 1) * n_cl..(g + 2) * n_cl]);
             for c in 0..n_cl {
@@ -373,13 +379,7 @@ impl ChainContact {
             let local = self.z_a_m - self.chain.offsets_m[k];
             let (g, sf) = t.locate(local);
             let lerp = |a: &[f64]| (1.0 - sf) * a[g] + sf * a[g + 1];
-            let phi = if k == self.share.first {
-                self.share.weight[0]
-            } else if k == self.share.first + 1 {
-                self.share.weight[1]
-            } else {
-                0.0
-            };
+            let phi = self.weight_of(k);
             if s.live {
                 reaction_sum += dot(&tables.csum, &s.x);
                 if (0.0..=lw).contains(&local) {
