@@ -66,9 +66,10 @@ impl Plant {
         if let Some(e) = self.encoders.as_mut() {
             e.update(&self.physics.q(), &self.physics.qd());
         }
-        let (f, m) = self.physics.wrench_on_tool();
+        let frames = self.physics.robot().frames(&self.physics.q());
+        let (f, m) = self.physics.wrench_on_tool_at(&frames.rot[6]);
         if let Some((chain, load)) = self.sensor.as_mut() {
-            let l = load.sample(self.physics.robot(), &self.physics.q(), &self.physics.qd());
+            let l = load.sample_at(self.physics.robot(), &frames, &self.physics.qd());
             let input = std::array::from_fn(|i| if i < 3 { f[i] } else { m[i - 3] } + l[i]);
             self.out = chain.sample(&input).0;
         } else {

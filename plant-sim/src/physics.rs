@@ -416,9 +416,18 @@ impl Physics {
     /// End-effector wrench the strip exerts on the tool (−F_e), as the sensor reports it
     /// ([`messages::WrenchFrame::SensorAtTcp`]): `(force N, torque N m)`. Zero without contact.
     pub fn wrench_on_tool(&self) -> ([f64; 3], [f64; 3]) {
+        if self.contact.is_none() && self.chain.is_none() {
+            return ([0.0; 3], [0.0; 3]);
+        }
+        self.wrench_on_tool_at(&self.robot.frames(&self.q).rot[6])
+    }
+
+    /// [`Physics::wrench_on_tool`] with the tool's orientation `rot_base_tool` (the current
+    /// state's `frames.rot[6]`) given, for a caller that has the frames already.
+    pub fn wrench_on_tool_at(&self, rot_base_tool: &nalgebra::Matrix3<f64>) -> ([f64; 3], [f64; 3]) {
         match (&self.contact, &self.chain) {
-            (Some(c), _) => c.wrench_on_tool_sensor(&self.robot.frames(&self.q).rot[6]),
-            (None, Some(c)) => c.wrench_on_tool_sensor(&self.robot.frames(&self.q).rot[6]),
+            (Some(c), _) => c.wrench_on_tool_sensor(rot_base_tool),
+            (None, Some(c)) => c.wrench_on_tool_sensor(rot_base_tool),
             (None, None) => ([0.0; 3], [0.0; 3]),
         }
     }

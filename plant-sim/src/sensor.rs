@@ -13,7 +13,7 @@
 //! Per axis `[Fx, Fy, Fz, Tx, Ty, Tz]`. Fixed-size and allocation-free (the 1 kHz path).
 
 use nalgebra::{Matrix3, Vector3};
-use robot::{Robot, Vec6};
+use robot::{Frames, Robot, Vec6};
 use scenarios::SensorConfig;
 
 use crate::rng::Rng;
@@ -135,11 +135,17 @@ impl ToolLoad {
     /// The tool's load on the sensor at `(q, q̇)`, tool axes about the TCP, as a wrench on the
     /// tool (the sense of `messages::Wrench`).
     pub fn sample(&mut self, robot: &Robot, q: &Vec6, qd: &Vec6) -> [f64; 6] {
-        let frames = robot.frames(q);
+        self.sample_at(robot, &robot.frames(q), qd)
+    }
+
+    /// [`ToolLoad::sample`] at the joints' `frames` (`robot.frames(q)`), which the plant computes
+    /// once per tick for the contact wrench as well: the same numbers, one forward kinematics
+    /// fewer.
+    pub fn sample_at(&mut self, robot: &Robot, frames: &Frames, qd: &Vec6) -> [f64; 6] {
         let rot = frames.rot[6];
-        let tcp = robot.tcp_position(&frames);
+        let tcp = robot.tcp_position(frames);
         let com = frames.pos[6] + rot * self.com_flange_m;
-        let jac = robot.jacobian_point(&frames, &com);
+        let jac = robot.jacobian_point(frames, &com);
         let twist = jac * qd;
         let (v, w) = (Vector3::new(twist[0], twist[1], twist[2]), Vector3::new(twist[3], twist[4], twist[5]));
         let (v0, w0) = self.prev.unwrap_or((v, w));

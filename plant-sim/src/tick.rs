@@ -81,8 +81,10 @@ struct Sensor {
 impl Sensor {
     /// Read the sensor at the physics' current state (one sample of the chain).
     fn read(&mut self, physics: &Physics) {
-        let (f, m) = physics.wrench_on_tool();
-        let load = self.load.sample(physics.robot(), &physics.q(), &physics.qd());
+        // One forward kinematics for the contact wrench's axes and the tool's load.
+        let frames = physics.robot().frames(&physics.q());
+        let (f, m) = physics.wrench_on_tool_at(&frames.rot[6]);
+        let load = self.load.sample_at(physics.robot(), &frames, &physics.qd());
         let input = std::array::from_fn(|i| if i < 3 { f[i] } else { m[i - 3] } + load[i]);
         (self.reading, self.saturated) = self.chain.sample(&input);
     }
