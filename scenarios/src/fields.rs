@@ -422,7 +422,7 @@ pub static FIELDS: &[Field] = &[
     num("controller.force_filter_hz", "Hz", range(lo_in(0.0), per(0.5, "loop.period_s", false)), "First-order low-pass on the measured wrench (0: none); below the Nyquist frequency."),
     // [recording]
     flag("recording.enabled", "Record the run to MCAP."),
-    int("recording.queue_capacity", "records", range(lo_in(16.0), hi_in(1048576.0)), "Bounded queue between the loop thread and the writer thread."),
+    int("recording.queue_capacity", "records", range(lo_in(16.0), hi_in(1048576.0)), "Bounded queue between the loop thread and the writer thread (in lockstep at most 1024: the loop waits for room instead)."),
     int("recording.chunk_size_bytes", "bytes", range(lo_in(1024.0), hi_in(1073741824.0)), "MCAP chunk size bound (a killed run loses at most the open chunk)."),
     num("recording.scene_rate_hz", "Hz", range(lo_ex(0.0), per(1.0, "loop.period_s", true)), "Rate of the Foxglove channels `/tf` (`foxglove.FrameTransforms`) and `/strip_scene` (`foxglove.SceneUpdate`): every round(1 / (rate period))-th tick; at most one per tick."),
     // [safety]
