@@ -103,8 +103,8 @@ fn long_seal_hands_over_between_windows_without_a_force_step_and_tracks_within_t
         ..plant_sim::contact::strip_params(&s)
     };
     let full = strip::chain::FullStatics::build(&p).unwrap();
-    let (out, _) = full.wheel(0.08, s.trajectory.force_ref_n);
-    let p_full = full.centre_line().iter().map(|&(i, _, a)| out.bottom_reaction_n[i] / a).fold(f64::NEG_INFINITY, f64::max);
+    let (statics, _) = full.wheel(0.08, s.trajectory.force_ref_n);
+    let p_full = full.centre_line().iter().map(|&(i, _, a)| statics.bottom_reaction_n[i] / a).fold(f64::NEG_INFINITY, f64::max);
     let near_feature = |z: f64| b.features.iter().any(|f| z > f.from_m - 20e-3 && z < f.to_m + 20e-3);
     let flat: Vec<(f64, f64)> = b
         .peak_pa
@@ -133,6 +133,38 @@ fn long_seal_hands_over_between_windows_without_a_force_step_and_tracks_within_t
     assert_eq!(b.features.len(), s.substrate.bumps.len() + s.substrate.seams.len());
     assert!(b.features.iter().all(|f| f.min_peak_pa.is_some() && f.force_error_max_abs_n.is_some()), "{:?}", b.features);
     assert!((0.0..=1.0).contains(&b.coverage_rolled) && b.along.len() == 30);
+
+    // The Foxglove scene: each `/strip_scene` draws the strip's top around the wheel (within a
+    // window and a spacing of it) and the substrate along the whole strip, its profile the
+    // scenario's bumps, dips and seam (`strip::chain::SubstrateProfile`, closed form).
+    use foxglove::Decode;
+    let profile = plant_sim::contact::chain::substrate_profile(&s);
+    let bytes = std::fs::read(&out).unwrap();
+    let (mut scenes, mut k) = (0, 0usize);
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        if m.channel.topic != "/strip_scene" {
+            continue;
+        }
+        let msg = foxglove::messages::SceneUpdate::decode(&m.data[..]).unwrap();
+        while k + 1 < rec.strip.len() && rec.log_time_ns[k] < m.log_time {
+            k += 1;
+        }
+        let wheel = rec.strip[k].wheel_z_m;
+        let strip = msg.entities.iter().find(|e| e.id == "strip").expect("the strip");
+        let z: Vec<f64> = strip.triangles[0].points.iter().map(|p| p.z).collect();
+        let (lo, hi) = (z.iter().copied().fold(f64::INFINITY, f64::min), z.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+        let reach = st.window_mm * 1e-3 + st.window_spacing_mm * 1e-3 + 1e-3;
+        assert!(lo <= wheel + 1e-3 && hi >= wheel - 1e-3 && wheel - lo <= reach && hi - wheel <= reach, "wheel {wheel}: drawn {lo}..{hi}");
+        let sub = msg.entities.iter().find(|e| e.id == "bulge").expect("the substrate");
+        let pts = &sub.lines[0].points;
+        assert!((pts.last().unwrap().z - st.length_mm * 1e-3).abs() < 1e-9, "the substrate along the whole strip");
+        for p in pts {
+            assert!((p.y - profile.height_m(p.z)).abs() < 1e-12, "substrate at z {}: {} vs {}", p.z, p.y, profile.height_m(p.z));
+        }
+        scenes += 1;
+    }
+    assert!(scenes > 1000, "{scenes} scenes");
 }
 
 /// Issue 25's acceptance on the 40 mm default scenario: the default keeps its single model, and

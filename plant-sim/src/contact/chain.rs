@@ -177,6 +177,12 @@ impl ChainContact {
         })
     }
 
+    /// Rest coordinates of one window's top nodes (window-local z), layer by layer: the layer
+    /// pattern the Foxglove scene repeats along the strip.
+    pub fn window_top_xyz_m(&self) -> &[[f64; 3]] {
+        &self.tables.top_xyz_m
+    }
+
     /// The chain of windows.
     pub fn chain(&self) -> &WindowChain {
         &self.chain
