@@ -194,7 +194,7 @@ pub fn open_recorder_with(
         chunk_size_bytes: scenario.recording.chunk_size_bytes,
         metadata,
         live,
-        scene: Some(scene_config(scenario, physics.contact())),
+        scene: Some(scene_config(scenario, physics.contact(), physics.chain())),
         period_s: l.period_s,
     };
     Recorder::start_with(cfg, tuning).with_context(|| format!("starting the recorder on {}", path.display()))
@@ -392,24 +392,49 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
 
 /// What the recording's Foxglove channels draw: the scenario's tool and placement, and the strip
 /// model's top surface (`recordings::scene`).
-fn scene_config(s: &scenarios::Scenario, contact: Option<&crate::contact::StripContact>) -> recordings::scene::SceneConfig {
+fn scene_config(
+    s: &scenarios::Scenario,
+    contact: Option<&crate::contact::StripContact>,
+    chain: Option<&crate::contact::chain::ChainContact>,
+) -> recordings::scene::SceneConfig {
     use recordings::scene::{SceneConfig, StripGeometry};
     let params = crate::contact::strip_params(s);
-    let strip = contact.map(|c| {
-        let top = c.top_xyz_m();
+    // A windowed long strip: one window's layer pattern repeated along the whole strip (the scene
+    // draws the layers around the wheel) and the substrate's profile at every element.
+    let long = chain.map(|c| {
+        let top = c.window_top_xyz_m();
         let nodes_per_layer = top.iter().take_while(|n| (n[2] - top[0][2]).abs() < 1e-12).count();
+        let (length_m, element_m) = (c.chain().strip_length_m, params.element_m);
+        let layers = (length_m / element_m).round() as usize + 1;
+        let top_xyz_m = (0..layers).flat_map(|k| top[..nodes_per_layer].iter().map(move |n| [n[0], n[1], k as f64 * element_m])).collect();
+        let profile = crate::contact::chain::substrate_profile(s);
         StripGeometry {
-            top_xyz_m: top.to_vec(),
+            top_xyz_m,
             nodes_per_layer,
-            substrate_zy_m: (0..=200)
-                .map(|i| {
-                    let z = params.length_m * i as f64 / 200.0;
-                    [z, params.bulge_height_m(z)]
-                })
-                .collect(),
-            length_m: params.length_m,
+            substrate_zy_m: (0..layers).map(|k| [k as f64 * element_m, profile.height_m(k as f64 * element_m)]).collect(),
+            length_m,
             half_width_m: strip::mesh::HALF_WIDTH_M,
+            windowed: true,
         }
+    });
+    let strip = long.or_else(|| {
+        contact.map(|c| {
+            let top = c.top_xyz_m();
+            let nodes_per_layer = top.iter().take_while(|n| (n[2] - top[0][2]).abs() < 1e-12).count();
+            StripGeometry {
+                top_xyz_m: top.to_vec(),
+                nodes_per_layer,
+                substrate_zy_m: (0..=200)
+                    .map(|i| {
+                        let z = params.length_m * i as f64 / 200.0;
+                        [z, params.bulge_height_m(z)]
+                    })
+                    .collect(),
+                length_m: params.length_m,
+                half_width_m: strip::mesh::HALF_WIDTH_M,
+                windowed: false,
+            }
+        })
     });
     SceneConfig {
         rate_hz: s.recording.scene_rate_hz,

@@ -13,6 +13,7 @@
 //!   wires in.
 
 pub mod attribution;
+pub mod bond_map;
 pub mod cli;
 pub mod compare;
 pub mod plots;

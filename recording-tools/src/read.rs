@@ -137,6 +137,9 @@ pub struct Recording {
     pub log_time_ns: Vec<u64>,
     /// z of the centre-line nodes as the first `/strip` message carrying them has it, m.
     pub strip_centreline_z_m: Vec<f32>,
+    /// Per `/strip` row, its nodes' z where they differ from `strip_centreline_z_m` (a windowed
+    /// long strip: the nodes around the wheel move with it), else empty. See [`Self::strip_row_z`].
+    pub strip_row_z_m: Vec<Vec<f32>>,
     /// How the file ends: complete, stopped early by the plant, cut short or corrupt.
     pub integrity: Integrity,
 }
@@ -320,9 +323,15 @@ impl Recording {
             1 => self.joint_torque.push(schema::decode_joint_torque(data).map_err(bad)?),
             2 => self.wrench.push(schema::decode_wrench(data).map_err(bad)?),
             3 => {
-                let (row, z) = schema::decode_strip(data, self.strip_centreline_z_m.is_empty()).map_err(bad)?;
-                if let Some(z) = z {
+                let (row, z) = schema::decode_strip(data, true).map_err(bad)?;
+                let z = z.unwrap_or_default();
+                if self.strip_centreline_z_m.is_empty() {
                     self.strip_centreline_z_m = z;
+                    self.strip_row_z_m.push(Vec::new());
+                } else if z != self.strip_centreline_z_m {
+                    self.strip_row_z_m.push(z);
+                } else {
+                    self.strip_row_z_m.push(Vec::new());
                 }
                 self.strip.push(row);
             }
@@ -402,6 +411,19 @@ impl Recording {
             return z;
         }
         self.strip_centreline_z_m.iter().map(|&z| z as f64).collect()
+    }
+
+    /// Whether the centre-line nodes move from row to row (a windowed long strip, issue 25).
+    pub fn strip_nodes_move(&self) -> bool {
+        self.strip_row_z_m.iter().any(|z| !z.is_empty())
+    }
+
+    /// z (m) of the centre-line nodes of `/strip` row `i`, as that message has them.
+    pub fn strip_row_z(&self, i: usize) -> &[f32] {
+        match self.strip_row_z_m.get(i) {
+            Some(z) if !z.is_empty() => z,
+            _ => &self.strip_centreline_z_m,
+        }
     }
 
     /// Index of the `/controller` row for each tick row (None where the controller sent none).

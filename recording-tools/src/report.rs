@@ -121,6 +121,9 @@ pub struct ReportNumbers {
     pub missed_ticks: Vec<(u64, &'static str)>,
     #[serde(skip)]
     pub attribution: Option<crate::attribution::Attribution>,
+    /// A windowed long strip's bond map (issue 25): the peak centre-line pressure per mm along
+    /// the strip, its coverage, per feature and per bin along the strip ([`crate::bond_map`]).
+    pub bond_map: Option<crate::bond_map::BondMap>,
 }
 
 /// Every tick row of a recording as the rolling-phase metric sees it ([`crate::tracking`]): the
@@ -228,6 +231,7 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         own_miss_rate: attribution.as_ref().filter(|a| a.stamped && a.periods > 0).map(|a| a.own_miss_rate()),
         missed_ticks: attribution.as_ref().map_or_else(Vec::new, |a| a.missed_ticks.iter().map(|&(t, c)| (t, c.name())).collect()),
         attribution,
+        bond_map: crate::bond_map::bond_map(rec),
     }
 }
 
@@ -245,6 +249,8 @@ fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
     }
     let force = tracking::force_tracking(&ticks, &roll);
     let z_nodes = rec.centreline_z_m();
+    let moving = rec.strip_nodes_move();
+    let mut row_z = Vec::new();
     let mut rolled = 0.0;
     let mut pressed = 0.0;
     let mut have_pressure = true;
@@ -253,7 +259,15 @@ fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
         let dz = (rec.strip[i].wheel_z_m - rec.strip[i - 1].wheel_z_m).abs();
         rolled += dz;
         let z = rec.strip[i].wheel_z_m;
-        match interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, z) {
+        // a windowed strip's nodes move with the wheel: this row's own
+        let nodes = if moving {
+            row_z.clear();
+            row_z.extend(rec.strip_row_z(i).iter().map(|&z| z as f64));
+            &row_z
+        } else {
+            &z_nodes
+        };
+        match interpolate(nodes, &rec.strip[i].centreline_pressure_pa, z) {
             Some(p) => {
                 // Compression is positive (the plant's convention); tension never bonds.
                 if p >= BOND_PRESSURE_PA {
@@ -355,6 +369,9 @@ pub fn format_text(n: &ReportNumbers) -> String {
                 _ => writeln!(s, "bond        no centre-line pressure or node positions (metadata centreline_z_m) recorded"),
             };
         }
+    }
+    if let Some(b) = &n.bond_map {
+        crate::bond_map::format_text(b, &mut s);
     }
     if let Some(a) = &n.attribution {
         s += &crate::attribution::format_table(a);
@@ -458,11 +475,19 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
 
     // The bond check: the centre-line pressure under the wheel along the roll (the 100 kPa line).
     let z_nodes = rec.centreline_z_m();
+    let moving = rec.strip_nodes_move();
+    let nodes_of = |i: usize| -> std::borrow::Cow<'_, [f64]> {
+        if moving {
+            std::borrow::Cow::Owned(rec.strip_row_z(i).iter().map(|&z| z as f64).collect())
+        } else {
+            std::borrow::Cow::Borrowed(&z_nodes)
+        }
+    };
     if !roll.is_empty() && !z_nodes.is_empty() {
         let points: Vec<(f64, f64)> = roll
             .iter()
             .filter_map(|&i| {
-                interpolate(&z_nodes, &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m)
+                interpolate(&nodes_of(i), &rec.strip[i].centreline_pressure_pa, rec.strip[i].wheel_z_m)
                     .map(|p| (rec.strip[i].wheel_z_m * 1e3, p * 1e-3))
             })
             .collect();
@@ -484,10 +509,11 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
         let mut series = Vec::new();
         for t in instants {
             let i = rec.joint_state.partition_point(|s| s.sim_time_s < t).min(rec.joint_state.len() - 1);
-            let s = &rec.strip[i.min(rec.strip.len() - 1)];
+            let i = i.min(rec.strip.len() - 1);
+            let s = &rec.strip[i];
             series.push(Series {
                 label: format!("t = {:.3} s, wheel at {:.1} mm", rec.joint_state[i].sim_time_s, s.wheel_z_m * 1e3),
-                points: z_nodes.iter().zip(&s.centreline_pressure_pa).map(|(z, p)| (z * 1e3, *p as f64 * 1e-3)).collect(),
+                points: nodes_of(i).iter().zip(&s.centreline_pressure_pa).map(|(z, p)| (z * 1e3, *p as f64 * 1e-3)).collect(),
             });
         }
         let plot = LinePlot {
@@ -498,6 +524,36 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
             hlines: vec![(BOND_PRESSURE_PA * 1e-3, "100 kPa bond pressure".into())],
         };
         files.figures.extend(plots::save_lines(&plot, &out_dir.join("bottom_pressure"))?);
+    }
+
+    // The long seal's bond map (issue 25): the peak centre-line pressure along the whole strip,
+    // and the force error of the rolling ticks against the wheel's position.
+    if let Some(b) = &n.bond_map {
+        let peak: Vec<(f64, f64)> =
+            b.peak_pa.iter().enumerate().filter_map(|(g, p)| p.map(|p| (g as f64 * b.step_m * 1e3, p * 1e-3))).collect();
+        if !peak.is_empty() {
+            let plot = LinePlot {
+                title: "Bond map: peak centre-line bottom pressure along the strip".into(),
+                x_label: "z along the strip [mm]".into(),
+                y_label: "peak bottom pressure [kPa]".into(),
+                series: vec![Series { label: "peak over the run".into(), points: peak }],
+                hlines: vec![(BOND_PRESSURE_PA * 1e-3, "100 kPa bond pressure".into())],
+            };
+            files.figures.extend(plots::save_lines(&plot, &out_dir.join("bond_map"))?);
+        }
+        let ticks = tracking_ticks(rec);
+        let errors: Vec<(f64, f64)> =
+            roll.iter().filter_map(|&i| ticks[i].force_error_n().map(|e| (ticks[i].wheel_z_m * 1e3, e))).collect();
+        if !errors.is_empty() {
+            let plot = LinePlot {
+                title: "Force error along the strip while rolling".into(),
+                x_label: "wheel position along the strip z [mm]".into(),
+                y_label: "|bottom force| - |set-point| [N]".into(),
+                series: vec![Series { label: "force error".into(), points: errors }],
+                hlines: vec![(0.45, "thesis bound +0.45 N".into()), (-0.45, "-0.45 N".into())],
+            };
+            files.figures.extend(plots::save_lines(&plot, &out_dir.join("force_error_along"))?);
+        }
     }
 
     // Joint torques as applied.

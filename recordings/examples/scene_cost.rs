@@ -24,6 +24,7 @@ fn main() {
             substrate_zy_m: (0..=200).map(|i| [i as f64 * 2e-4, 0.0]).collect(),
             length_m: 0.04,
             half_width_m: 0.004,
+            windowed: false,
         }),
     };
     let mut rec = recordings::TickRecord::default();

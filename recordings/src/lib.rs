@@ -84,8 +84,15 @@ pub struct StripRecord {
     pub top_displacement_m: f64,
     /// Number of valid entries in `centreline_pressure_pa`.
     pub n_centreline: u32,
-    /// Bottom pressure at the centre-line nodes (x = 0), ordered by z, Pa. The nodes' z go once
-    /// into the recording's metadata (key `centreline_z_m`, a JSON array of m).
+    /// Where this tick's centre-line nodes lie along the strip when they move with the wheel (a
+    /// windowed long strip, issue 25): node i at `centreline_z0_m + i centreline_dz_m`, m. A
+    /// `centreline_dz_m` of 0 (the single model) means the nodes are fixed and their z went once
+    /// into the recording's metadata (key `centreline_z_m`). Two scalars rather than a z per
+    /// node: the plant's record stays the same fixed size and the writer thread expands them.
+    pub centreline_z0_m: f64,
+    pub centreline_dz_m: f64,
+    /// Bottom pressure at the centre-line nodes (x = 0), ordered by z, Pa. The nodes' z: see
+    /// `centreline_z0_m`.
     pub centreline_pressure_pa: [f64; MAX_CENTRELINE],
     /// Normal (task +y) displacement of the top surface's centre line (the bulb's crest, x = 0)
     /// at the same z as `centreline_pressure_pa`, m, bulge included; `n_centreline` valid. Drawn
@@ -342,6 +349,8 @@ impl Default for StripRecord {
             max_bottom_pressure_pa: 0.0,
             top_displacement_m: 0.0,
             n_centreline: 0,
+            centreline_z0_m: 0.0,
+            centreline_dz_m: 0.0,
             centreline_pressure_pa: [0.0; MAX_CENTRELINE],
             top_centreline_uy_m: [0.0; MAX_CENTRELINE],
         }

@@ -75,6 +75,11 @@ pub struct StripGeometry {
     pub substrate_zy_m: Vec<[f64; 2]>,
     pub length_m: f64,
     pub half_width_m: f64,
+    /// A windowed long strip (issue 25): `top_xyz_m` covers the whole strip, but each scene draws
+    /// only the layers the tick's centre line covers (the windows around the wheel, where the
+    /// pressure is recorded) and raises their top by the substrate's height under them (the
+    /// chain computes no top centre line: `top_uy_m` is zero). The substrate is drawn whole.
+    pub windowed: bool,
 }
 
 impl SceneConfig {
@@ -167,6 +172,30 @@ fn interp_from(z: &[f32], v: &[f32], x: f64, from: &mut usize) -> f64 {
     v[n - 1] as f64
 }
 
+/// The substrate's height at `z` from the (z, y) samples `zy` (ascending z; held beyond the
+/// ends), searching from `*from` on as [`interp_from`] does.
+fn substrate_height(zy: &[[f64; 2]], z: f64, from: &mut usize) -> f64 {
+    let n = zy.len();
+    if n == 0 {
+        return 0.0;
+    }
+    if z <= zy[0][0] {
+        return zy[0][1];
+    }
+    if *from < 1 || *from > n || z <= zy[*from - 1][0] {
+        *from = 1;
+    }
+    for i in *from..n {
+        if z <= zy[i][0] {
+            *from = i;
+            let ([z0, y0], [z1, y1]) = (zy[i - 1], zy[i]);
+            let s = if z1 > z0 { (z - z0) / (z1 - z0) } else { 0.0 };
+            return (1.0 - s) * y0 + s * y1;
+        }
+    }
+    zy[n - 1][1]
+}
+
 /// `foxglove.FrameTransforms` of one tick: the URDF chain base → link1 → ... → link6 → flange →
 /// tcp from the robot's forward kinematics of the recorded q, and base → task.
 pub fn frame_transforms(robot: &Robot, cfg: &SceneConfig, q: &[f64; 6], ns: u64) -> FrameTransforms {
@@ -234,13 +263,30 @@ pub fn scene_update(
     if let Some(g) = &cfg.strip {
         let s = &r.strip;
         let mut strip = entity("strip", "task");
-        let n = g.top_xyz_m.len();
+        // A windowed strip: the layers within the tick's centre line (+ half an element for f32 z).
+        let top: &[[f64; 3]] = match (g.windowed, centreline_z_m.first(), centreline_z_m.last()) {
+            (true, Some(&lo), Some(&hi)) => {
+                let per = g.nodes_per_layer.max(1);
+                let layer_z = |k: usize| g.top_xyz_m[k * per][2];
+                let layers = g.top_xyz_m.len() / per;
+                let tol = 0.5 * (hi - lo) as f64 / centreline_z_m.len().max(2) as f64;
+                let k0 = (0..layers).find(|&k| layer_z(k) >= lo as f64 - tol).unwrap_or(layers);
+                let k1 = (k0..layers).find(|&k| layer_z(k) > hi as f64 + tol).unwrap_or(layers);
+                &g.top_xyz_m[k0 * per..k1 * per]
+            }
+            (true, _, _) => &[],
+            _ => &g.top_xyz_m,
+        };
+        let n = top.len();
         let mut points = Vec::with_capacity(n);
         let mut colors = Vec::with_capacity(n);
         // The nodes come layer by layer in ascending z: one cursor per quantity.
-        let (mut at_u, mut at_p) = (1, 1);
-        for p in &g.top_xyz_m {
-            let uy = interp_from(centreline_z_m, top_uy_m, p[2], &mut at_u);
+        let (mut at_u, mut at_p, mut at_s) = (1, 1, 1);
+        for p in top {
+            let mut uy = interp_from(centreline_z_m, top_uy_m, p[2], &mut at_u);
+            if g.windowed {
+                uy += substrate_height(&g.substrate_zy_m, p[2], &mut at_s);
+            }
             let z = quantise(p[2], POSITION_STEP_M);
             points.push(Point3 { x: quantise(p[0], POSITION_STEP_M), y: quantise(p[1] + uy, POSITION_STEP_M), z });
             // the colour of the vertex as drawn (at its rounded z)
@@ -403,6 +449,58 @@ mod tests {
     }
 
     /// The colour map at its documented points.
+    /// A windowed long strip: the scene draws only the layers the tick's centre line covers,
+    /// their top raised by the substrate's height there (a 0.3 mm step at 100 mm here), coloured
+    /// by the tick's pressure, and the substrate whole.
+    #[test]
+    fn a_windowed_strip_draws_the_layers_around_the_wheel_on_the_substrate() {
+        let (per, layers, el) = (3usize, 301usize, 1e-3);
+        let top_xyz_m = (0..layers).flat_map(|k| [-2e-3, 0.0, 2e-3].map(|x| [x, 0.01, k as f64 * el])).collect();
+        let step = |z: f64| if z >= 0.1 { 3e-4 } else { 0.0 };
+        let cfg = SceneConfig {
+            rate_hz: 100.0,
+            tool: Tool::default(),
+            task_in_base: Isometry3::identity(),
+            strip: Some(StripGeometry {
+                top_xyz_m,
+                nodes_per_layer: per,
+                substrate_zy_m: (0..layers).map(|k| [k as f64 * el, step(k as f64 * el)]).collect(),
+                length_m: 0.3,
+                half_width_m: 4e-3,
+                windowed: true,
+            }),
+        };
+        let mut rec = crate::TickRecord::default();
+        rec.strip.n_centreline = 61;
+        rec.strip.wheel_z_m = 0.1;
+        let head = TickHead::of(&rec);
+        // the nodes 70..=130 mm, as the writer expands z0 = 70 mm, dz = 1 mm
+        let z: Vec<f32> = (0..61).map(|i| (0.07 + i as f64 * el) as f32).collect();
+        let p: Vec<f32> = (0..61).map(|i| if i == 30 { 150e3 } else { 50e3 }).collect();
+        let u = vec![0.0f32; 61];
+        let msg = scene_update(&cfg, &head, &z, &p, &u, 0);
+        let strip = msg.entities.iter().find(|e| e.id == "strip").unwrap();
+        let tri = &strip.triangles[0];
+        assert_eq!(tri.points.len(), 61 * per, "the 61 layers around the wheel");
+        assert!((tri.points[0].z - 0.07).abs() < 1e-6 && (tri.points[61 * per - 1].z - 0.13).abs() < 1e-6);
+        for q in &tri.points {
+            let want = 0.01
+                + if q.z > 0.1 + 1e-6 {
+                    3e-4
+                } else if q.z < 0.1 - 1e-6 {
+                    0.0
+                } else {
+                    q.y - 0.01
+                };
+            assert!((q.y - want).abs() < 2e-6, "z {} y {} want {want}", q.z, q.y);
+        }
+        assert_eq!(tri.indices.len(), 6 * 60 * (per - 1));
+        let c = &tri.colors[30 * per];
+        assert_eq!([c.r, c.g, c.b], [1.0, 0.9 * 0.5, 0.1 * 0.5].map(|v| quantise(v, COLOUR_STEP)), "150 kPa under the wheel");
+        let bulge = msg.entities.iter().find(|e| e.id == "bulge").unwrap();
+        assert_eq!(bulge.lines[0].points.len(), layers, "the substrate along the whole strip");
+    }
+
     #[test]
     fn pressure_colours_at_the_documented_points() {
         assert_eq!(pressure_colour(-5e3), [0.1, 0.2, 0.6, 1.0]);

@@ -96,7 +96,7 @@ float64 bottom_force            # N, total bottom reaction force
 float64 max_bottom_pressure     # Pa, largest bottom pressure on the centre line x = 0
 float64 top_displacement        # m, top-surface normal displacement under the wheel
 float32[] centreline_pressure   # Pa, bottom pressure at the centre-line nodes (x = 0), by z
-float32[] centreline_z          # m, z of those nodes (the same every tick)
+float32[] centreline_z          # m, z of those nodes along the strip (single model: the same every tick; windowed long strip: the nodes around the wheel)
 ",
 };
 
@@ -255,6 +255,9 @@ pub struct StripHead {
     pub max_bottom_pressure_pa: f64,
     pub top_displacement_m: f64,
     pub n_centreline: u32,
+    /// [`crate::StripRecord::centreline_z0_m`], `centreline_dz_m`: the nodes' z when they move.
+    pub centreline_z0_m: f64,
+    pub centreline_dz_m: f64,
 }
 
 impl TickHead {
@@ -276,6 +279,8 @@ impl TickHead {
                 max_bottom_pressure_pa: s.max_bottom_pressure_pa,
                 top_displacement_m: s.top_displacement_m,
                 n_centreline: (s.n_centreline as usize).min(MAX_CENTRELINE) as u32,
+                centreline_z0_m: s.centreline_z0_m,
+                centreline_dz_m: s.centreline_dz_m,
             },
             timing: r.timing,
         }
@@ -317,8 +322,8 @@ pub fn encode_wrench(buf: &mut Vec<u8>, r: &TickHead) {
     w.u32(r.wrench.frame);
 }
 
-/// `centreline_pressure_pa`: the valid pressures; `centreline_z_m`: the nodes' z from the
-/// metadata (empty if unknown).
+/// `centreline_pressure_pa`: the valid pressures; `centreline_z_m`: the nodes' z, from the
+/// metadata (empty if unknown) or, for a windowed strip, this tick's ([`StripHead::centreline_z0_m`]).
 pub fn encode_strip(buf: &mut Vec<u8>, r: &TickHead, centreline_pressure_pa: &[f32], centreline_z_m: &[f32]) {
     let s = &r.strip;
     let mut w = CdrWriter::new(buf);
@@ -529,7 +534,8 @@ pub fn decode_wrench(msg: &[u8]) -> Result<Wrench, CdrError> {
     Ok(Wrench { contract_version: CONTRACT_VERSION, frame, tick, force, torque })
 }
 
-/// Decodes a `/strip` message; its `centreline_z` (the same every tick) only if `want_z`.
+/// Decodes a `/strip` message; its `centreline_z` (the same every tick for the single model,
+/// moving with the wheel on a windowed strip) only if `want_z`.
 pub fn decode_strip(msg: &[u8], want_z: bool) -> Result<(StripRow, Option<Vec<f32>>), CdrError> {
     let mut r = CdrReader::new(msg)?;
     let row = StripRow {

@@ -362,6 +362,7 @@ impl Recorder {
             has_egm,
             buf: Vec::with_capacity(4096),
             centreline_z,
+            moving_z: Vec::with_capacity(MAX_CENTRELINE),
             pressure: Vec::with_capacity(MAX_CENTRELINE),
             top_uy: Vec::with_capacity(MAX_CENTRELINE),
             fox,
@@ -555,6 +556,9 @@ struct WriterThread {
     has_egm: bool,
     buf: Vec<u8>,
     centreline_z: Vec<f32>,
+    /// The z of the tick's centre-line nodes when they move with the wheel (a windowed strip:
+    /// `StripHead::centreline_dz_m` > 0), expanded here, off the loop; capacity reserved.
+    moving_z: Vec<f32>,
     /// Centre-line pressures of the tick being written.
     pressure: Vec<f32>,
     /// Top centre-line displacements of the tick being written.
@@ -648,7 +652,7 @@ impl WriterThread {
 
     /// Takes the next slot: the tick head is copied out, its pressures go to `self.pressure`.
     fn pop(&mut self) -> Option<Popped> {
-        let Self { consumer, pressure, top_uy, .. } = self;
+        let Self { consumer, pressure, top_uy, moving_z, .. } = self;
         let chunk = consumer.read_chunk(1).ok()?;
         let slot = &chunk.as_slices().0[0];
         let item = match slot.kind {
@@ -662,6 +666,11 @@ impl WriterThread {
                 top_uy.clear();
                 // SAFETY: record_tick wrote the first n_centreline top displacements.
                 top_uy.extend(slot.top_uy_m[..n].iter().map(|p| unsafe { p.assume_init() }));
+                moving_z.clear();
+                let (z0, dz) = (head.strip.centreline_z0_m, head.strip.centreline_dz_m);
+                if dz > 0.0 {
+                    moving_z.extend((0..n).map(|i| (z0 + i as f64 * dz) as f32));
+                }
                 Popped::Tick(head)
             }
             // SAFETY: record_event wrote the event.
@@ -693,7 +702,8 @@ impl WriterThread {
         // The tick's timeline stamp; the real publish wall clock is in /timing.
         let publish_time = log_time;
         let dropped = self.shared.dropped_ticks.load(Ordering::Relaxed) + self.shared.dropped_events.load(Ordering::Relaxed);
-        let Self { mcap, channel_ids, buf, centreline_z, pressure, bytes_since_flush, live, .. } = self;
+        let Self { mcap, channel_ids, buf, centreline_z, moving_z, pressure, bytes_since_flush, live, .. } = self;
+        let centreline_z = if r.strip.centreline_dz_m > 0.0 { &*moving_z } else { &*centreline_z };
         let mcap = mcap.as_mut().expect("checked by handle");
         let mut put = |ch: usize, buf: &Vec<u8>| -> Result<(), mcap::McapError> {
             *bytes_since_flush += buf.len() as u64 + 31; // + message record header
@@ -780,11 +790,13 @@ impl WriterThread {
             robot,
             scene_every,
             centreline_z,
+            moving_z,
             pressure,
             top_uy,
             robot_description,
             ..
         } = self;
+        let centreline_z = if r.strip.centreline_dz_m > 0.0 { &*moving_z } else { &*centreline_z };
         let (Some(cfg), Some(robot)) = (scene.as_ref(), robot.as_ref()) else { return Ok(()) };
         if !r.state.tick.is_multiple_of(*scene_every) {
             return Ok(());

@@ -344,7 +344,18 @@ pub static FIELDS: &[Field] = &[
     // [bulge]
     num("bulge.height_mm", "mm", range(lo_ex(-STRIP_TOP_MM), hi_ex(STRIP_TOP_MM)), "Peak height of the raised-cosine bump of the substrate under the strip (negative: a dip); less than the strip's 8 mm height at its centre."),
     num("bulge.half_width_mm", "mm", POSITIVE, "Half the bump's full width along the strip."),
-    num("bulge.center_mm", "mm", range(lo_in(0.0), of(1.0, "strip.length_mm", true)), "Position of the bump's peak along the strip."),
+    with_rule(
+        num("bulge.center_mm", "mm", range(lo_in(0.0), of(1.0, "strip.length_mm", true)), "Position of the bump's peak along the strip."),
+        "with bulge.half_width_mm within [0, strip.length_mm] on a windowed strip (strip.window_mm > 0) when bulge.height_mm is not 0: the chain carries it as one of the substrate's bumps",
+        |s| {
+            let (b, l) = (&s.bulge, s.strip.length_mm);
+            if s.strip.window_mm == 0.0 || b.height_mm == 0.0 || (b.center_mm - b.half_width_mm >= 0.0 && b.center_mm + b.half_width_mm <= l) {
+                Ok(())
+            } else {
+                Err(format!("the bump spans {} to {} mm, beyond [0, {}] mm", fmt_num(b.center_mm - b.half_width_mm), fmt_num(b.center_mm + b.half_width_mm), fmt_num(l)))
+            }
+        },
+    ),
     // [substrate]
     Field {
         key: "substrate.bumps",

@@ -762,6 +762,15 @@ mod tests {
             msg.contains("x/w.toml") && msg.contains("field strip.window_mm = 50: must be in [0, strip.length_mm] = [0, 40] mm"),
             "{msg}"
         );
+        // the single model's [bulge] on a windowed strip is one more bump: it must lie on the strip
+        let e = Scenario::from_toml_str(
+            "[strip]\nlength_mm = 600\nwindow_mm = 40\n\n[bulge]\nheight_mm = 0.2\nhalf_width_mm = 10\ncenter_mm = 595\n",
+            Path::new("x/b.toml"),
+        )
+        .unwrap_err();
+        let msg = e.to_string();
+        assert_eq!((e.field(), e.place()), (Some("bulge.center_mm"), Some(Place::Line(8))), "{msg}");
+        assert!(msg.contains("x/b.toml") && msg.contains("the bump spans 585 to 605 mm, beyond [0, 600] mm"), "{msg}");
         // substrate features need a windowed strip; a long strip needs windows
         let e = Scenario::from_toml_str("[substrate]\nbumps = [[20, 5, 0.1]]\n", Path::new("t.toml")).unwrap_err();
         assert_eq!((e.field(), e.place()), (Some("substrate.bumps"), Some(Place::Line(2))), "{e}");

@@ -177,6 +177,12 @@ impl ChainContact {
         })
     }
 
+    /// Rest coordinates of one window's top nodes (window-local z), layer by layer: the layer
+    /// pattern the Foxglove scene repeats along the strip.
+    pub fn window_top_xyz_m(&self) -> &[[f64; 3]] {
+        &self.tables.top_xyz_m
+    }
+
     /// The chain of windows.
     pub fn chain(&self) -> &WindowChain {
         &self.chain
@@ -366,8 +372,11 @@ impl ChainContact {
         (lo, count)
     }
 
-    /// Strip outputs at the current state for the recording (as [`StripContact::fill_record`];
-    /// the centre line is not recorded per tick: its nodes move with the wheel).
+    /// Strip outputs at the current state for the recording (as [`StripContact::fill_record`]):
+    /// the centre-line bottom pressure of the layers the pool's windows cover (about 60 mm
+    /// around the wheel for 40 mm windows 10 mm apart), at their strip positions
+    /// (`centreline_z0_m`, `centreline_dz_m`: one element apart); the top's centre line is not
+    /// computed (zeros).
     pub fn fill_record(&self, r: &mut StripRecord) {
         let tables = &*self.tables;
         let t = &tables.table;
@@ -395,11 +404,14 @@ impl ChainContact {
         r.contact_force_n = f;
         r.bottom_force_n = -reaction_sum;
         r.top_displacement_m = u_w;
-        let (_, count) = self.centreline_pressure_pa(&mut r.centreline_pressure_pa);
+        let (first, count) = self.centreline_pressure_pa(&mut r.centreline_pressure_pa);
         r.max_bottom_pressure_pa = r.centreline_pressure_pa[..count].iter().copied().fold(0.0, f64::max);
-        r.centreline_pressure_pa[..count].fill(0.0);
-        r.top_centreline_uy_m.fill(0.0);
-        r.n_centreline = 0;
+        // The layers around the wheel in strip coordinates (the bond map's samples): their z as
+        // two scalars, expanded by the recorder's writer thread.
+        r.n_centreline = count as u32;
+        r.centreline_z0_m = first as f64 * self.element_m;
+        r.centreline_dz_m = self.element_m;
+        r.top_centreline_uy_m[..count].fill(0.0);
     }
 }
 
