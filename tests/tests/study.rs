@@ -73,7 +73,7 @@ fn a_study_tabulates_its_cases_keeps_the_failing_recordings_and_reproduces_its_w
     // the summary: the pass count and the Wilson interval's closed form
     let (lo, hi) = wilson(passed as f64, 8.0);
     let line = format!(
-        "Pass rate: {passed} of 8 ({:.1} %), 95 % confidence interval {:.1} % to {:.1} % (Wilson)",
+        "Pass rate: {passed} of 8 ({:.2} %), 95 % confidence interval {:.2} % to {:.2} % (Wilson)",
         100.0 * passed as f64 / 8.0,
         100.0 * lo,
         100.0 * hi.min(1.0)

@@ -85,7 +85,7 @@ pub fn summary(study: &Study, dir: &Path, records: &[CaseRecord], missing: &[usi
     let (lo, hi) = stats::wilson_95(passed, n);
     let _ = writeln!(
         s,
-        "**Pass rate: {passed} of {n} ({:.1} %), 95 % confidence interval {:.1} % to {:.1} % (Wilson).**\n",
+        "**Pass rate: {passed} of {n} ({:.2} %), 95 % confidence interval {:.2} % to {:.2} % (Wilson).**\n",
         100.0 * passed as f64 / n.max(1) as f64,
         100.0 * lo,
         100.0 * hi
