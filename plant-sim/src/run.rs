@@ -76,7 +76,7 @@ impl RunSummary {
         let edges = [0.0, 10.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0, 300.0, 500.0, 1000.0, 2000.0];
         serde_json::json!({
             "rig": rig,
-            "mode": match self.mode { Mode::Realtime => "realtime", Mode::Lockstep => "lockstep" },
+            "mode": self.mode.name(),
             "ticks": s.ticks,
             "misses": s.misses,
             "safe_stops": s.safe_stops,
