@@ -624,7 +624,7 @@ fn main() {
         Err(e) => {
             eprintln!("rig: error: {e:#}");
             // `rig replay` as a plant: the daemons' statuses for a taken rig name or unusable shared memory.
-            std::process::exit(e.downcast_ref::<messages::host::HostError>().map_or(1, |h| h.exit_code));
+            std::process::exit(e.downcast_ref::<messages::host::HostError>().map_or(1, messages::host::HostError::exit_code));
         }
     }
 }

@@ -259,7 +259,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
         Ok(w) => Some(w),
         Err(e) => {
             // The daemons report an unusable host themselves (exit 71); rig only loses this check.
-            tracing::debug!("no connect watch: {e}");
+            tracing::debug!("no connect watch: {}", messages::ports::WithCauses(&e));
             None
         }
     };

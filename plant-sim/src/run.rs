@@ -199,7 +199,7 @@ const LAUNCHER_EXIT_GRACE: std::time::Duration = std::time::Duration::from_milli
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let t_run = std::time::Instant::now();
     let launcher = crate::launcher::Launcher::now();
-    messages::services::validate_rig_name(&opts.rig).map_err(anyhow::Error::msg)?;
+    messages::services::validate_rig_name(&opts.rig)?;
     let scenario = Scenario::load(&opts.scenario_path)?;
     let scenario_text =
         std::fs::read_to_string(&opts.scenario_path).with_context(|| format!("reading {}", opts.scenario_path.display()))?;
