@@ -37,14 +37,14 @@ fn main() -> ExitCode {
             // Tolerates a closed stderr (a launcher that died).
             messages::host::print_stderr(&format!("controller: error: {e:#}\n"));
             // Shared memory unusable has its own status (71, `messages::host`), other errors 1.
-            let code = e.downcast_ref::<messages::host::HostError>().map_or(1, |h| h.exit_code);
+            let code = e.downcast_ref::<messages::host::HostError>().map_or(1, messages::host::HostError::exit_code);
             ExitCode::from(code as u8)
         }
     }
 }
 
 fn run(args: &Args) -> anyhow::Result<()> {
-    messages::services::validate_rig_name(&args.rig).map_err(anyhow::Error::msg)?;
+    messages::services::validate_rig_name(&args.rig)?;
     let scenario = scenarios::Scenario::load(&args.scenario)?;
     // Before any node: the rig's iceoryx2 configuration and room in /dev/shm.
     messages::host::prepare()?;

@@ -25,7 +25,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
-use supervise::{Ending, RigLaunch};
+use scenarios::Mode;
+use supervise::{Controller, Ending, RigLaunch};
 
 #[derive(Debug, Parser)]
 #[command(name = "rig", about = "Hardware-in-the-loop rig for weatherstrip force control: plant + controller over iceoryx2 at 1 kHz")]
@@ -73,8 +74,8 @@ struct RunArgs {
     /// Scenario file (default: scenarios/default.toml).
     scenario: Option<PathBuf>,
     /// Loop mode, overriding the scenario's.
-    #[arg(long, value_parser = ["realtime", "lockstep"])]
-    mode: Option<String>,
+    #[arg(long, value_parser = mode_flag())]
+    mode: Option<Mode>,
     /// Override one scenario field, `section.field=value` (repeatable); the scenario actually run
     /// is written to <DIR>/scenario.toml and checked like any scenario file before anything starts.
     #[arg(long = "set", value_parser = sweep::parse_set)]
@@ -114,8 +115,8 @@ struct LaunchArgs {
     /// scenario with `[egm] enabled`). Any program that takes `--rig NAME --scenario FILE` and
     /// speaks the contract of messages/README.md (or EGM). `none` with an EGM scenario: start no
     /// controller, the plant waits for an external EGM client at `egm.sensor_address`.
-    #[arg(long)]
-    controller: Option<PathBuf>,
+    #[arg(long, value_parser = Controller::from_flag)]
+    controller: Option<Controller>,
     /// Simulated seconds to run, per case for a sweep (default: the scenario's).
     #[arg(long, allow_hyphen_values = true, value_parser = seconds)]
     duration: Option<f64>,
@@ -133,8 +134,9 @@ struct TimingArgs {
     /// Scenario (default: the default scenario without the strip, holding its start pose).
     #[arg(long)]
     scenario: Option<PathBuf>,
-    #[arg(long)]
-    controller: Option<PathBuf>,
+    /// Controller executable (default: `controller` next to `rig`).
+    #[arg(long, value_parser = Controller::from_flag)]
+    controller: Option<Controller>,
     /// Output directory (default: runs/<UTC time>-<rig>/).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -198,6 +200,12 @@ fn positive_hertz(s: &str) -> Result<f64, String> {
 }
 
 /// A flag's length of time, s (`--duration`, `--seconds`).
+/// `--mode`: one of the scenario's loop modes, by the name scenario files use (the help lists them).
+fn mode_flag() -> impl clap::builder::TypedValueParser<Value = Mode> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Mode::ALL.map(Mode::name)).try_map(|s| s.parse::<Mode>())
+}
+
 fn seconds(s: &str) -> Result<f64, String> {
     flag_number(s, false, "seconds")
 }
@@ -267,10 +275,10 @@ fn utc_stamp() -> String {
 fn prepare(
     rig: String,
     scenario: PathBuf,
-    mode: Option<String>,
+    mode: Option<Mode>,
     (duration_flag, duration_s): (&str, Option<f64>),
     out: Option<PathBuf>,
-    controller: Option<PathBuf>,
+    controller: Option<Controller>,
     live: Option<recordings::LiveConfig>,
 ) -> anyhow::Result<RigLaunch> {
     // Fail early, with file/line/field, before any process starts.
@@ -279,26 +287,23 @@ fn prepare(
     if let Some(l) = &live {
         check_live(l, &parsed, &scenario)?;
     }
-    let no_controller = controller.as_deref() == Some(Path::new("none"));
-    anyhow::ensure!(
-        !no_controller || parsed.egm.enabled,
-        "--controller none needs a scenario with [egm] enabled (an external EGM client answers the plant); {} has none",
-        scenario.display()
-    );
-    if let Some(p) = controller.as_ref().filter(|_| !no_controller) {
-        check_controller(p)?;
+    match &controller {
+        Some(Controller::ExternalEgm) => anyhow::ensure!(
+            parsed.egm.enabled,
+            "--controller none needs a scenario with [egm] enabled (an external EGM client answers the plant); {} has none",
+            scenario.display()
+        ),
+        Some(Controller::Program(p)) => check_controller(p)?,
+        None => {}
     }
-    let lockstep = match mode.as_deref() {
-        Some(m) => m == "lockstep",
-        None => parsed.loop_.mode == scenarios::Mode::Lockstep,
-    };
+    let lockstep = mode.unwrap_or(parsed.loop_.mode) == Mode::Lockstep;
     let dir = out.unwrap_or_else(|| Path::new("runs").join(format!("{}-{rig}", utc_stamp())));
     std::fs::create_dir_all(&dir).with_context(|| format!("--out {}: creating the output directory", dir.display()))?;
     let plant_bin = supervise::sibling_binary("plant-sim")?;
-    let controller_bin = match controller {
-        Some(p) => p,
-        None if parsed.egm.enabled => supervise::sibling_binary("egm-controller")?,
-        None => supervise::sibling_binary("controller")?,
+    let controller = match controller {
+        Some(c) => c,
+        None if parsed.egm.enabled => Controller::Program(supervise::sibling_binary("egm-controller")?),
+        None => Controller::Program(supervise::sibling_binary("controller")?),
     };
     // The one strip-model cache `rig model build` fills too.
     let cache_dir = strip::cache::cache_dir();
@@ -309,7 +314,7 @@ fn prepare(
         duration_s,
         recording: dir.join("run.mcap"),
         plant_bin,
-        controller_bin,
+        controller,
         cache_dir,
         // Same CPU as plant-sim's lockstep loop.
         controller_cpu: lockstep.then(plant_sim::rt::lockstep_cpu),
@@ -317,7 +322,6 @@ fn prepare(
         live,
         host_probe: false,
         host_probe_period_us: None,
-        no_controller,
         connect_timeout: std::time::Duration::from_secs_f64(parsed.loop_.connect_timeout_s),
     })
 }
@@ -328,13 +332,7 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 
 /// Supervise, print the summary (or the failure), return the exit code.
 fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> anyhow::Result<i32> {
-    eprintln!(
-        "rig {}: plant {} + controller {}, scenario {}",
-        l.rig,
-        l.plant_bin.display(),
-        l.controller_bin.display(),
-        l.scenario.display()
-    );
+    eprintln!("rig {}: plant {} + controller {}, scenario {}", l.rig, l.plant_bin.display(), l.controller, l.scenario.display());
     let outcome = runtime()?.block_on(supervise::supervise(l))?;
     match &outcome.plant_summary {
         Some(v) => {
@@ -480,7 +478,7 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
             let mut l = prepare(
                 supervise::unique_rig_name(),
                 path.clone(),
-                Some("lockstep".into()),
+                Some(Mode::Lockstep),
                 ("--duration", a.launch.duration),
                 Some(case_dir.clone()),
                 Some(controller.clone()),
@@ -571,7 +569,7 @@ fn main() {
                 scenario = sweep::write_overridden(&scenario, &a.set, &dir.join("scenario.toml"))?;
             }
             if a.in_process {
-                anyhow::ensure!(a.mode.as_deref() == Some("lockstep"), "--in-process runs lockstep only: give --mode lockstep");
+                anyhow::ensure!(a.mode == Some(Mode::Lockstep), "--in-process runs lockstep only: give --mode lockstep");
                 anyhow::ensure!(a.launch.controller.is_none(), "--in-process runs the built-in controller; --controller needs the daemons");
                 anyhow::ensure!(a.live.live.is_none(), "--in-process has no live view (the live view needs the plant daemon)");
                 return run_in_process(&rig, &scenario, a.launch.duration, &dir);
@@ -607,7 +605,7 @@ fn main() {
                 }
             };
             let live = a.live.config();
-            let mut l = prepare(rig, scenario, Some("realtime".into()), ("--seconds", Some(a.seconds)), Some(dir), a.controller, live)?;
+            let mut l = prepare(rig, scenario, Some(Mode::Realtime), ("--seconds", Some(a.seconds)), Some(dir), a.controller, live)?;
             l.host_probe = !a.no_host_probe;
             l.host_probe_period_us = a.probe_period_us;
             launch_and_report(&l, true, a.json.as_deref())
@@ -626,7 +624,35 @@ fn main() {
         Err(e) => {
             eprintln!("rig: error: {e:#}");
             // `rig replay` as a plant: the daemons' statuses for a taken rig name or unusable shared memory.
-            std::process::exit(e.downcast_ref::<messages::host::HostError>().map_or(1, |h| h.exit_code));
+            std::process::exit(e.downcast_ref::<messages::host::HostError>().map_or(1, messages::host::HostError::exit_code));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run_args(args: &[&str]) -> Result<RunArgs, clap::Error> {
+        match Cli::try_parse_from([&["rig", "run"][..], args].concat())?.cmd {
+            Cmd::Run(a) => Ok(a),
+            other => panic!("not a run: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_mode_is_parsed_once_into_the_scenarios_enum_and_a_bad_one_names_the_choices() {
+        assert_eq!(run_args(&["--mode", "lockstep"]).unwrap().mode, Some(Mode::Lockstep));
+        assert_eq!(run_args(&["--mode", "realtime"]).unwrap().mode, Some(Mode::Realtime));
+        assert_eq!(run_args(&[]).unwrap().mode, None);
+        let e = run_args(&["--mode", "fast"]).unwrap_err().to_string();
+        assert!(e.contains("'fast'") && e.contains("[possible values: realtime, lockstep]"), "{e}");
+    }
+
+    #[test]
+    fn controller_none_is_the_external_egm_client_and_anything_else_a_program() {
+        assert_eq!(run_args(&["--controller", "none"]).unwrap().launch.controller, Some(Controller::ExternalEgm));
+        assert_eq!(run_args(&["--controller", "./none"]).unwrap().launch.controller, Some(Controller::Program(PathBuf::from("./none"))));
+        assert_eq!(run_args(&[]).unwrap().launch.controller, None);
     }
 }

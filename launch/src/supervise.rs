@@ -11,16 +11,43 @@ use tokio::io::AsyncReadExt;
 use tokio::process::{Child, Command};
 use tokio::signal::unix::{signal, SignalKind};
 
+/// Which controller a run starts (`--controller`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Controller {
+    /// This executable, started with `--rig NAME --scenario FILE`.
+    Program(PathBuf),
+    /// `--controller none` (EGM scenarios): start no controller, the plant waits for an external
+    /// EGM client at the scenario's sensor address.
+    ExternalEgm,
+}
+
+impl Controller {
+    /// `--controller`'s value: `none` is the external EGM client, anything else a program.
+    pub fn from_flag(s: &str) -> Result<Controller, std::convert::Infallible> {
+        Ok(if s == "none" { Controller::ExternalEgm } else { Controller::Program(PathBuf::from(s)) })
+    }
+}
+
+impl std::fmt::Display for Controller {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Controller::Program(p) => write!(f, "{}", p.display()),
+            Controller::ExternalEgm => f.write_str("none (an external EGM client)"),
+        }
+    }
+}
+
 /// What to start.
 #[derive(Debug, Clone)]
 pub struct RigLaunch {
     pub rig: String,
     pub scenario: PathBuf,
-    pub mode: Option<String>,
+    /// Overrides the scenario's `loop.mode`.
+    pub mode: Option<scenarios::Mode>,
     pub duration_s: Option<f64>,
     pub recording: PathBuf,
     pub plant_bin: PathBuf,
-    pub controller_bin: PathBuf,
+    pub controller: Controller,
     pub cache_dir: PathBuf,
     /// Lockstep: start the controller pinned to this CPU, the one `plant-sim` pins its loop to.
     pub controller_cpu: Option<usize>,
@@ -32,9 +59,6 @@ pub struct RigLaunch {
     pub host_probe: bool,
     /// Its period, µs (None: plant-sim's default).
     pub host_probe_period_us: Option<u64>,
-    /// `--controller none` (EGM scenarios): start no controller, the plant waits for an external
-    /// EGM client at the scenario's sensor address.
-    pub no_controller: bool,
     /// The scenario's `loop.connect_timeout_s`: how long the controller process may take to
     /// answer its first state before it is named and the run ends (exit 3).
     pub connect_timeout: Duration,
@@ -202,8 +226,8 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     if quiet {
         plant_cmd.env("RUST_LOG", "warn");
     }
-    if let Some(m) = &l.mode {
-        plant_cmd.arg("--mode").arg(m);
+    if let Some(m) = l.mode {
+        plant_cmd.arg("--mode").arg(m.name());
     }
     if let Some(d) = l.duration_s {
         plant_cmd.arg("--duration").arg(d.to_string());
@@ -225,20 +249,21 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
         s
     });
 
-    if l.no_controller {
-        return finish(plant_alone(&mut plant).await?, reader, false, false).await;
-    }
+    let controller_bin = match &l.controller {
+        Controller::Program(p) => p,
+        Controller::ExternalEgm => return finish(plant_alone(&mut plant).await?, reader, false, false).await,
+    };
     // Watch for the controller's first answer from before it starts (its earliest torque counts).
     let controller_pid = std::sync::Arc::new(std::sync::atomic::AtomicU32::new(0));
     let connect_watch = match messages::connect::ConnectWatch::spawn(&l.rig, controller_pid.clone(), l.connect_timeout) {
         Ok(w) => Some(w),
         Err(e) => {
             // The daemons report an unusable host themselves (exit 71); rig only loses this check.
-            tracing::debug!("no connect watch: {e}");
+            tracing::debug!("no connect watch: {}", messages::ports::WithCauses(&e));
             None
         }
     };
-    let mut ctrl_cmd = Command::new(&l.controller_bin);
+    let mut ctrl_cmd = Command::new(controller_bin);
     ctrl_cmd.arg("--rig").arg(&l.rig).arg("--scenario").arg(&l.scenario).stdout(Stdio::inherit()).stderr(Stdio::inherit());
     if quiet {
         ctrl_cmd.env("RUST_LOG", "warn");
@@ -252,7 +277,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             });
         }
     }
-    let mut controller = match spawn(&mut ctrl_cmd, "controller", &l.controller_bin) {
+    let mut controller = match spawn(&mut ctrl_cmd, "controller", controller_bin) {
         Ok(c) => c,
         Err(e) => {
             let _ = stop(&mut plant, Duration::from_secs(5)).await;
@@ -333,7 +358,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             let pid = controller.id().unwrap_or(0);
             let sentence = format!(
                 "the controller {} (pid {pid}) is running but answered no state within {:.1} s (loop.connect_timeout_s): {}",
-                l.controller_bin.display(),
+                controller_bin.display(),
                 l.connect_timeout.as_secs_f64(),
                 seen.explain(&l.rig)
             );

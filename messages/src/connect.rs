@@ -103,11 +103,11 @@ impl ConnectWatch {
         let thread = std::thread::Builder::new()
             .name("connect-watch".into())
             .spawn(move || watch(&rig_s, &pid_of, timeout, &st, &tx))
-            .map_err(|e| PortError(format!("rig {rig:?}: start the connect watcher: {e}")))?;
+            .map_err(|source| PortError::Spawn { rig: rig.to_string(), watcher: "connect", source })?;
         match rx.recv() {
             Ok(Ok(())) => Ok(ConnectWatch { stop, thread: Some(thread) }),
             Ok(Err(e)) => Err(e),
-            Err(_) => Err(PortError(format!("rig {rig:?}: the connect watcher ended at start-up"))),
+            Err(_) => Err(PortError::WatcherEnded { rig: rig.to_string(), watcher: "connect" }),
         }
     }
 
@@ -141,9 +141,10 @@ fn watch(
         let node = crate::ports::node(rig, "rig-connect")?;
         let state = crate::ports::pubsub::<JointState>(&node, rig, services::JOINT_STATE)?;
         let torque = crate::ports::pubsub::<JointTorque>(&node, rig, services::JOINT_TORQUE)?;
-        let sub = |what| PortError(format!("rig {rig:?}: the connect watcher's {what} subscriber"));
-        let state_sub = state.subscriber_builder().create().map_err(|_| sub("state"))?;
-        let torque_sub = torque.subscriber_builder().create().map_err(|_| sub("torque"))?;
+        let state_sub =
+            state.subscriber_builder().create().map_err(|e| crate::ports::err(rig, "the connect watcher's state subscriber", e))?;
+        let torque_sub =
+            torque.subscriber_builder().create().map_err(|e| crate::ports::err(rig, "the connect watcher's torque subscriber", e))?;
         Ok((node, torque, state_sub, torque_sub))
     })();
     let (node, torque, state_sub, torque_sub) = match setup {

@@ -13,7 +13,7 @@ use std::io::{Read, Seek, Write};
 use std::os::fd::AsRawFd;
 use std::os::unix::fs::{DirBuilderExt, MetadataExt, OpenOptionsExt, PermissionsExt};
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
@@ -51,22 +51,50 @@ pub const CONFIG_TEMPLATE: &str = include_str!("../iceoryx2.toml");
 /// Environment variable that moves the state directory (every peer of a rig must see the same).
 pub const STATE_DIR_ENV: &str = "RIG_ICEORYX2_DIR";
 
-/// A host problem that stops a daemon, with the exit status it should end with.
-#[derive(Debug)]
-pub struct HostError {
-    pub exit_code: i32,
-    pub message: String,
+/// The OS or iceoryx2 error behind a [`HostError`], shared so that the error can be kept once
+/// per process (the configuration is set up once) and handed to every caller.
+pub type Cause = Arc<dyn std::error::Error + Send + Sync>;
+
+/// A host problem that stops a daemon; [`HostError::exit_code`] is the status it should end
+/// with. The message is one sentence with its fix; the OS or iceoryx2 error behind it is its
+/// `source()`, so that `{:#}` chains print it once.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum HostError {
+    /// Shared memory or the rig's state directory is unusable ([`EXIT_SHARED_MEMORY`]): `what`
+    /// says what and how to fix it.
+    #[error("{what}")]
+    SharedMemory {
+        what: String,
+        #[source]
+        source: Option<Cause>,
+    },
+    /// A live plant already runs rig `rig` ([`EXIT_RIG_TAKEN`]); `pid` is that plant's, if known.
+    #[error("rig {rig:?} is already running ({}); start this plant with another --rig name, or stop that one first", holder(.pid))]
+    RigTaken { rig: String, pid: Option<i32> },
 }
 
-impl std::fmt::Display for HostError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.message)
+impl HostError {
+    /// The exit status a daemon ends with on this error (sysexits).
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            HostError::SharedMemory { .. } => EXIT_SHARED_MEMORY,
+            HostError::RigTaken { .. } => EXIT_RIG_TAKEN,
+        }
     }
 }
-impl std::error::Error for HostError {}
 
-fn shm_error(message: String) -> HostError {
-    HostError { exit_code: EXIT_SHARED_MEMORY, message }
+/// Who holds a taken rig, for [`HostError::RigTaken`]'s message.
+fn holder(pid: &Option<i32>) -> String {
+    pid.map_or("another plant".to_string(), |p| format!("the plant with PID {p}"))
+}
+
+fn shm_error(what: String) -> HostError {
+    HostError::SharedMemory { what, source: None }
+}
+
+/// [`shm_error`] with the error behind it.
+fn shm_error_from(what: String, source: impl std::error::Error + Send + Sync + 'static) -> HostError {
+    HostError::SharedMemory { what, source: Some(Arc::new(source)) }
 }
 
 fn euid() -> u32 {
@@ -111,23 +139,26 @@ fn private_dir(dir: &Path) -> Result<(), HostError> {
     }
     if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty() && !p.exists()) {
         std::fs::DirBuilder::new().recursive(true).mode(0o700).create(parent).map_err(|e| {
-            shm_error(format!(
-                "cannot create {} for the rig's iceoryx2 files ({e}); set {STATE_DIR_ENV} to a directory of yours",
-                parent.display()
-            ))
+            shm_error_from(
+                format!("cannot create {} for the rig's iceoryx2 files; set {STATE_DIR_ENV} to a directory of yours", parent.display()),
+                e,
+            )
         })?;
     }
     match std::fs::DirBuilder::new().mode(0o700).create(dir) {
         Ok(()) => {}
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
         Err(e) => {
-            return Err(shm_error(format!(
-                "cannot create the rig's state directory {} ({e}); make its parent writable or set {STATE_DIR_ENV} to a directory of yours",
-                dir.display()
-            )))
+            return Err(shm_error_from(
+                format!(
+                    "cannot create the rig's state directory {}; make its parent writable or set {STATE_DIR_ENV} to a directory of yours",
+                    dir.display()
+                ),
+                e,
+            ))
         }
     }
-    let m = std::fs::symlink_metadata(dir).map_err(|e| shm_error(format!("cannot inspect {} ({e})", dir.display())))?;
+    let m = std::fs::symlink_metadata(dir).map_err(|e| shm_error_from(format!("cannot inspect {}", dir.display()), e))?;
     if !m.is_dir() || m.uid() != uid {
         return Err(shm_error(format!(
             "the rig's state directory {} is not a directory owned by you (uid {uid}; it belongs to uid {}): if another user created it first, remove it; or set {STATE_DIR_ENV} to a directory of yours",
@@ -137,7 +168,7 @@ fn private_dir(dir: &Path) -> Result<(), HostError> {
     }
     if m.mode() & 0o077 != 0 {
         std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
-            .map_err(|e| shm_error(format!("cannot make {} owner-only ({e})", dir.display())))?;
+            .map_err(|e| shm_error_from(format!("cannot make {} owner-only", dir.display()), e))?;
     }
     Ok(())
 }
@@ -147,7 +178,7 @@ fn effective_config_text(dir: &Path) -> Result<String, HostError> {
     let mut random = [0u8; 6];
     File::open("/dev/urandom")
         .and_then(|mut f| f.read_exact(&mut random))
-        .map_err(|e| shm_error(format!("cannot read /dev/urandom for the rig's iceoryx2 prefix ({e})")))?;
+        .map_err(|e| shm_error_from("cannot read /dev/urandom for the rig's iceoryx2 prefix".into(), e))?;
     let hex: String = random.iter().map(|b| format!("{b:02x}")).collect();
     let root = dir.join("iox2");
     let mut out = String::from("# Written by the rig from messages/iceoryx2.toml for this user; load it, do not edit it.\n");
@@ -180,13 +211,13 @@ fn ensure_config_file(dir: &Path) -> Result<PathBuf, HostError> {
             .and_then(|mut f| f.write_all(text.as_bytes()));
         if let Err(e) = written {
             let _ = std::fs::remove_file(&tmp);
-            return Err(shm_error(format!("cannot write the rig's iceoryx2 configuration to {} ({e})", dir.display())));
+            return Err(shm_error_from(format!("cannot write the rig's iceoryx2 configuration to {}", dir.display()), e));
         }
         let linked = std::fs::hard_link(&tmp, &path);
         let _ = std::fs::remove_file(&tmp);
         if let Err(e) = linked {
             if e.kind() != std::io::ErrorKind::AlreadyExists {
-                return Err(shm_error(format!("cannot install {} ({e})", path.display())));
+                return Err(shm_error_from(format!("cannot install {}", path.display()), e));
             }
         }
     }
@@ -197,27 +228,30 @@ fn ensure_config_file(dir: &Path) -> Result<PathBuf, HostError> {
 /// anything else touches iceoryx2; that also keeps iceoryx2's "No config file was loaded"
 /// warning away).
 pub fn iceoryx2_config() -> Result<&'static Config, HostError> {
-    static CONFIG: OnceLock<Result<&'static Config, String>> = OnceLock::new();
+    static CONFIG: OnceLock<Result<&'static Config, HostError>> = OnceLock::new();
     CONFIG
         .get_or_init(|| {
             set_log_level_from_env_or(LogLevel::Error);
             let dir = state_dir();
-            private_dir(&dir).map_err(|e| e.message)?;
-            let path = ensure_config_file(&dir).map_err(|e| e.message)?;
-            let wanted = std::fs::read_to_string(&path).map_err(|e| format!("cannot read {} ({e})", path.display()))?;
-            let fp = FilePath::new(path.as_os_str().as_encoded_bytes())
-                .map_err(|e| format!("{} is not a path iceoryx2 accepts ({e:?}); set {STATE_DIR_ENV} to a shorter one", path.display()))?;
+            private_dir(&dir)?;
+            let path = ensure_config_file(&dir)?;
+            let wanted = std::fs::read_to_string(&path).map_err(|e| shm_error_from(format!("cannot read {}", path.display()), e))?;
+            let fp = FilePath::new(path.as_os_str().as_encoded_bytes()).map_err(|e| {
+                shm_error_from(format!("{} is not a path iceoryx2 accepts; set {STATE_DIR_ENV} to a shorter one", path.display()), e)
+            })?;
             let cfg = Config::setup_global_config_from_file(&fp).map_err(|e| {
-                format!("iceoryx2 refused its configuration {} ({e:?}); remove the file, the next daemon writes it anew", path.display())
+                shm_error_from(
+                    format!("iceoryx2 refused its configuration {}; remove the file, the next daemon writes it anew", path.display()),
+                    e,
+                )
             })?;
             // setup_global_config_from_file returns an earlier global config silently.
             if !wanted.contains(&format!("prefix = \"{}\"", cfg.global.prefix)) {
-                return Err(format!("iceoryx2 was used before the rig loaded {} (a bug of this program)", path.display()));
+                return Err(shm_error(format!("iceoryx2 was used before the rig loaded {} (a bug of this program)", path.display())));
             }
             Ok(cfg)
         })
         .clone()
-        .map_err(shm_error)
 }
 
 /// Check that [`SHM_DIR`] exists, is writable and has [`SHM_REQUIRED_BYTES`] free.
@@ -232,12 +266,12 @@ fn check_shared_memory_at(dir: &Path) -> Result<(), HostError> {
             "{d} does not exist: iceoryx2 keeps the rig's shared memory there; mount a tmpfs (`mount -t tmpfs -o size=64m tmpfs {d}`), or start the container with one (`docker run --shm-size=64m`)"
         )));
     }
-    let c = std::ffi::CString::new(dir.as_os_str().as_encoded_bytes()).map_err(|_| shm_error(format!("{d}: bad path")))?;
+    let c = std::ffi::CString::new(dir.as_os_str().as_encoded_bytes()).map_err(|e| shm_error_from(format!("{d}: bad path"), e))?;
     // SAFETY: statvfs fills the zeroed struct we own; c is a valid C string.
     let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
     // SAFETY: c is a valid NUL-terminated path and st a statvfs we own.
     if unsafe { libc::statvfs(c.as_ptr(), &mut st) } != 0 {
-        return Err(shm_error(format!("cannot inspect {d} ({})", std::io::Error::last_os_error())));
+        return Err(shm_error_from(format!("cannot inspect {d}"), std::io::Error::last_os_error()));
     }
     if st.f_flag & libc::ST_RDONLY != 0 {
         return Err(shm_error(format!(
@@ -246,11 +280,10 @@ fn check_shared_memory_at(dir: &Path) -> Result<(), HostError> {
     }
     // SAFETY: as above.
     if unsafe { libc::access(c.as_ptr(), libc::W_OK | libc::X_OK) } != 0 {
-        return Err(shm_error(format!(
-            "{d} is not writable for uid {} ({}): make it a tmpfs with mode 1777 (`chmod 1777 {d}`)",
-            euid(),
-            std::io::Error::last_os_error()
-        )));
+        return Err(shm_error_from(
+            format!("{d} is not writable for uid {}: make it a tmpfs with mode 1777 (`chmod 1777 {d}`)", euid()),
+            std::io::Error::last_os_error(),
+        ));
     }
     let free = st.f_bavail as u64 * st.f_frsize as u64;
     if free < SHM_REQUIRED_BYTES {
@@ -295,7 +328,7 @@ pub fn lock_down_global_mgmt(cfg: &Config) -> Result<(), HostError> {
         }
         if m.mode() & 0o077 != 0 {
             f.set_permissions(std::fs::Permissions::from_mode(0o600))
-                .map_err(|e| shm_error(format!("cannot make {} owner-only ({e})", path.display())))?;
+                .map_err(|e| shm_error_from(format!("cannot make {} owner-only", path.display()), e))?;
         }
     }
     Ok(())
@@ -320,11 +353,7 @@ impl Drop for PlantClaim {
 }
 
 fn rig_taken(rig: &str, pid: Option<i32>) -> HostError {
-    let who = pid.map_or("another plant".to_string(), |p| format!("the plant with PID {p}"));
-    HostError {
-        exit_code: EXIT_RIG_TAKEN,
-        message: format!("rig {rig:?} is already running ({who}); start this plant with another --rig name, or stop that one first"),
-    }
+    HostError::RigTaken { rig: rig.to_string(), pid }
 }
 
 /// PID of a live node named `plant-sim/<rig>`, from iceoryx2's node list.
@@ -358,7 +387,7 @@ pub fn claim_plant(rig: &str, cfg: &Config) -> Result<PlantClaim, HostError> {
             .mode(0o600)
             .custom_flags(libc::O_NOFOLLOW)
             .open(&path)
-            .map_err(|e| shm_error(format!("cannot open the rig's lock file {} ({e})", path.display())))?;
+            .map_err(|e| shm_error_from(format!("cannot open the rig's lock file {}", path.display()), e))?;
         // SAFETY: flock on a descriptor we own.
         if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
             let pid = live_plant_pid(rig, cfg).or_else(|| {
@@ -482,8 +511,28 @@ mod tests {
     #[test]
     fn a_missing_directory_is_one_sentence_with_the_fix() {
         let e = check_shared_memory_at(Path::new("/nonexistent-shm-dir")).unwrap_err();
-        assert_eq!(e.exit_code, EXIT_SHARED_MEMORY);
-        assert!(e.message.contains("does not exist") && e.message.contains("--shm-size"), "{e}");
+        assert_eq!(e.exit_code(), EXIT_SHARED_MEMORY);
+        let m = e.to_string();
+        assert!(m.contains("does not exist") && m.contains("--shm-size"), "{e}");
+    }
+
+    #[test]
+    fn a_taken_rig_is_one_sentence_naming_the_holder_with_its_own_status() {
+        let e = rig_taken("r1", Some(42));
+        assert_eq!(e.exit_code(), EXIT_RIG_TAKEN);
+        assert_eq!(
+            e.to_string(),
+            "rig \"r1\" is already running (the plant with PID 42); start this plant with another --rig name, or stop that one first"
+        );
+        assert!(rig_taken("r1", None).to_string().contains("(another plant)"));
+    }
+
+    #[test]
+    fn an_os_error_is_the_source_not_part_of_the_sentence() {
+        let e = shm_error_from("cannot inspect /x".into(), std::io::Error::from_raw_os_error(libc::EACCES));
+        assert_eq!(e.to_string(), "cannot inspect /x");
+        let cause = std::error::Error::source(&e).expect("the OS error is the source").to_string();
+        assert!(cause.contains("os error 13"), "{cause}");
     }
 
     #[test]

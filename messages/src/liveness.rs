@@ -89,11 +89,11 @@ impl PeerWatch {
         let thread = std::thread::Builder::new()
             .name("peer-watch".into())
             .spawn(move || watch_thread(&rig_s, &role_s, watched, &sh, &tx))
-            .map_err(|e| PortError(format!("rig {rig:?}: start the peer watcher: {e}")))?;
+            .map_err(|source| PortError::Spawn { rig: rig.to_string(), watcher: "peer", source })?;
         match rx.recv() {
             Ok(Ok(())) => Ok(PeerWatch { shared, thread: Some(thread) }),
             Ok(Err(e)) => Err(e),
-            Err(_) => Err(PortError(format!("rig {rig:?}: the peer watcher ended at start-up"))),
+            Err(_) => Err(PortError::WatcherEnded { rig: rig.to_string(), watcher: "peer" }),
         }
     }
 

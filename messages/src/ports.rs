@@ -17,19 +17,54 @@ type Sub<T> = iceoryx2::port::subscriber::Subscriber<ipc::Service, T, ()>;
 type Notifier = iceoryx2::port::notifier::Notifier<ipc::Service>;
 type Listener = iceoryx2::port::listener::Listener<ipc::Service>;
 
-/// Failure to open or use a rig's services. The message names the rig and service.
-#[derive(Debug)]
-pub struct PortError(pub String);
-
-impl std::fmt::Display for PortError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
+/// Failure to open or use a rig's services. The message names the rig and the step; the
+/// iceoryx2 (or OS) error behind it is its `source()`, so that `{:#}` chains (or
+/// [`WithCauses`]) print it once.
+#[derive(Debug, thiserror::Error)]
+pub enum PortError {
+    /// The rig name cannot name services.
+    #[error(transparent)]
+    RigName(#[from] services::RigNameError),
+    /// The host is not fit for a rig (its iceoryx2 configuration, shared memory).
+    #[error(transparent)]
+    Host(#[from] crate::host::HostError),
+    /// iceoryx2 could not create the rig's node.
+    #[error(
+        "rig {rig:?}: iceoryx2 could not create its node: check that {} has room and is writable and that {} is yours; if the rig's files vanish while it runs, systemd-logind removes a user's IPC at logout (set RemoveIPC=no)",
+        crate::host::SHM_DIR,
+        .state_dir.display()
+    )]
+    Node { rig: String, state_dir: std::path::PathBuf, source: iceoryx2::node::NodeCreationFailure },
+    /// iceoryx2 refused one step (`what`: "open service joint_state", "send wrench", ...).
+    #[error("rig {rig:?}: {what}")]
+    Iceoryx2 { rig: String, what: String, source: Box<dyn std::error::Error + Send + Sync> },
+    /// A watcher thread (`watcher`: "peer", "connect") could not be started.
+    #[error("rig {rig:?}: start the {watcher} watcher")]
+    Spawn { rig: String, watcher: &'static str, source: std::io::Error },
+    /// A watcher thread ended before it said whether its set-up worked.
+    #[error("rig {rig:?}: the {watcher} watcher ended at start-up")]
+    WatcherEnded { rig: String, watcher: &'static str },
 }
-impl std::error::Error for PortError {}
 
-fn err(rig: &str, what: &str, e: impl std::fmt::Debug) -> PortError {
-    PortError(format!("rig {rig:?}: {what}: {e:?}"))
+/// iceoryx2 refused step `what` of rig `rig`.
+pub(crate) fn err(rig: &str, what: &str, e: impl std::error::Error + Send + Sync + 'static) -> PortError {
+    PortError::Iceoryx2 { rig: rig.to_string(), what: what.to_string(), source: Box::new(e) }
+}
+
+/// An error and its causes on one line, `error: cause: cause` (as anyhow's `{:#}` prints them),
+/// for the places that print an error without anyhow.
+pub struct WithCauses<'a>(pub &'a (dyn std::error::Error + 'static));
+
+impl std::fmt::Display for WithCauses<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.0)?;
+        let mut cause = self.0.source();
+        while let Some(c) = cause {
+            write!(f, ": {c}")?;
+            cause = c.source();
+        }
+        Ok(())
+    }
 }
 
 /// Remove the shared-memory resources of iceoryx2 nodes whose process died (a killed plant or
@@ -52,7 +87,7 @@ pub fn clean_dead_nodes() -> usize {
 pub(crate) fn node(rig: &str, role: &str) -> Result<Node<ipc::Service>, PortError> {
     // The rig's own configuration (messages/iceoryx2.toml, per user; it also sets iceoryx2's log
     // level to errors unless IOX2_LOG_LEVEL asks for more).
-    let cfg = crate::host::iceoryx2_config().map_err(|e| PortError(e.message))?;
+    let cfg = crate::host::iceoryx2_config()?;
     let name = format!("{role}/{rig}");
     let name: NodeName = name.as_str().try_into().map_err(|e| err(rig, "node name", e))?;
     // Our daemons handle SIGINT/SIGTERM themselves (finalise the recording, say goodbye).
@@ -61,19 +96,13 @@ pub(crate) fn node(rig: &str, role: &str) -> Result<Node<ipc::Service>, PortErro
         .config(cfg)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|e| {
-            PortError(format!(
-                "rig {rig:?}: iceoryx2 could not create its node ({e:?}): check that {} has room and is writable and that {} is yours; if the rig's files vanish while it runs, systemd-logind removes a user's IPC at logout (set RemoveIPC=no)",
-                crate::host::SHM_DIR,
-                crate::host::state_dir().display()
-            ))
-        })?;
-    crate::host::lock_down_global_mgmt(cfg).map_err(|e| PortError(e.message))?;
+        .map_err(|source| PortError::Node { rig: rig.to_string(), state_dir: crate::host::state_dir(), source })?;
+    crate::host::lock_down_global_mgmt(cfg)?;
     Ok(node)
 }
 
 fn service_name(rig: &str, svc: &str) -> Result<ServiceName, PortError> {
-    services::validate_rig_name(rig).map_err(PortError)?;
+    services::validate_rig_name(rig)?;
     services::service_name(rig, svc).as_str().try_into().map_err(|e| err(rig, svc, e))
 }
 

@@ -18,13 +18,25 @@ pub const STATE_READY: &str = "state_ready";
 /// Event: the controller notifies after publishing the torque of a tick.
 pub const TORQUE_READY: &str = "torque_ready";
 
+/// Longest rig name, bytes.
+pub const MAX_RIG_NAME: usize = 64;
+
+/// A rig name that cannot name a rig's services; the message names it and the rule it breaks.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RigNameError {
+    #[error("rig name {0:?} must be 1..={MAX_RIG_NAME} characters")]
+    Length(String),
+    #[error("rig name {0:?} may only contain ASCII letters, digits, '_', '-' and '.'")]
+    Characters(String),
+}
+
 /// Characters allowed in a rig name (it becomes part of shared-memory file names).
-pub fn validate_rig_name(rig: &str) -> Result<(), String> {
-    if rig.is_empty() || rig.len() > 64 {
-        return Err(format!("rig name {rig:?} must be 1..=64 characters"));
+pub fn validate_rig_name(rig: &str) -> Result<(), RigNameError> {
+    if rig.is_empty() || rig.len() > MAX_RIG_NAME {
+        return Err(RigNameError::Length(rig.to_string()));
     }
     if !rig.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.') {
-        return Err(format!("rig name {rig:?} may only contain ASCII letters, digits, '_', '-' and '.'"));
+        return Err(RigNameError::Characters(rig.to_string()));
     }
     Ok(())
 }
@@ -42,7 +54,12 @@ mod tests {
         assert_eq!(service_name("a1", JOINT_STATE), "rig/a1/joint_state");
         assert_ne!(service_name("a1", WRENCH), service_name("a2", WRENCH));
         assert!(validate_rig_name("test-17_x").is_ok());
-        assert!(validate_rig_name("bad/name").is_err());
-        assert!(validate_rig_name("").is_err());
+        assert_eq!(validate_rig_name("bad/name"), Err(RigNameError::Characters("bad/name".into())));
+        assert_eq!(validate_rig_name(""), Err(RigNameError::Length(String::new())));
+        assert!(validate_rig_name(&"x".repeat(MAX_RIG_NAME)).is_ok());
+        assert_eq!(
+            validate_rig_name(&"x".repeat(MAX_RIG_NAME + 1)).unwrap_err().to_string(),
+            format!("rig name {:?} must be 1..=64 characters", "x".repeat(MAX_RIG_NAME + 1))
+        );
     }
 }

@@ -35,7 +35,7 @@ use std::sync::Arc;
 use nalgebra::{Matrix3, Vector3};
 use recordings::{StripRecord, MAX_CENTRELINE};
 use robot::Vec6;
-use scenarios::Scenario;
+use scenarios::{Boundary, Scenario};
 use strip::{CbBoundary, StripModel, StripParams, Substrate};
 
 use scenarios::geometry::{TaskFrame, STRIP_TOP_HEIGHT_M};
@@ -58,7 +58,10 @@ pub fn strip_params(s: &Scenario) -> StripParams {
         density_kg_m3: st.density_kg_m3,
         damping_alpha_per_s: st.damping_alpha,
         damping_beta_s: st.damping_beta,
-        substrate: if st.boundary == "sliding" { Substrate::Sliding } else { Substrate::Bonded },
+        substrate: match st.boundary {
+            Boundary::Bonded => Substrate::Bonded,
+            Boundary::Sliding => Substrate::Sliding,
+        },
         cb_boundary: CbBoundary::Y,
         cb_cutoff_hz: st.cutoff_hz,
         order: st.order,

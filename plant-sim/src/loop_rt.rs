@@ -201,7 +201,7 @@ impl PlantLoop<'_> {
         let publish_wall_ns = rt::now_wall_ns();
         let publish_ns = rt::now_mono_ns();
         if let Err(e) = self.ports.publish(&state, &wrench) {
-            tracing::error!("{e}");
+            tracing::error!("{}", messages::ports::WithCauses(&e));
             self.event(tick, self.sim_time_s(tick), EventKind::Fault, "publishing the state failed");
         }
         let published_ns = rt::now_mono_ns();

@@ -71,7 +71,7 @@ fn main() {
         Err(e) => {
             messages::host::print_stderr(&format!("plant-sim: error: {e:#}\n"));
             // A host problem (rig name taken, shared memory unusable) has its own status.
-            let code = e.downcast_ref::<messages::host::HostError>().map_or(1, |h| h.exit_code);
+            let code = e.downcast_ref::<messages::host::HostError>().map_or(1, messages::host::HostError::exit_code);
             std::process::exit(code);
         }
     }

@@ -27,7 +27,7 @@ use std::sync::Arc;
 use anyhow::Context;
 use robot::{Robot, Vec6};
 use scenarios::geometry::{self, TaskFrame};
-use scenarios::{Integrator, Scenario};
+use scenarios::{Boundary, Integrator, Scenario};
 
 use crate::contact::StripTables;
 
@@ -187,7 +187,7 @@ pub struct Physics {
 /// carries load much farther along the strip than a window reaches (`strip::chain`).
 fn not_sliding_windows(s: &Scenario) -> anyhow::Result<()> {
     anyhow::ensure!(
-        !s.strip.enabled || s.strip.window_mm == 0.0 || s.strip.boundary != "sliding",
+        !s.strip.enabled || s.strip.window_mm == 0.0 || s.strip.boundary != Boundary::Sliding,
         "strip.window_mm = {} mm with strip.boundary = \"sliding\": the windowed long strip (issue 25) holds for the bonded substrate only (a sliding bottom carries load farther than a window reaches)",
         s.strip.window_mm
     );
@@ -485,7 +485,7 @@ mod tests {
         let mut s = Scenario::default();
         s.strip.length_mm = 600.0;
         s.strip.window_mm = 40.0;
-        s.strip.boundary = "sliding".into();
+        s.strip.boundary = Boundary::Sliding;
         let e = Physics::new(&s, Path::new("/nonexistent/strip-cache")).err().expect("refused").to_string();
         assert!(e.contains("strip.window_mm = 40 mm") && e.contains("bonded substrate only"), "{e}");
     }

@@ -76,7 +76,7 @@ impl RunSummary {
         let edges = [0.0, 10.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0, 300.0, 500.0, 1000.0, 2000.0];
         serde_json::json!({
             "rig": rig,
-            "mode": match self.mode { Mode::Realtime => "realtime", Mode::Lockstep => "lockstep" },
+            "mode": self.mode.name(),
             "ticks": s.ticks,
             "misses": s.misses,
             "safe_stops": s.safe_stops,
@@ -208,7 +208,7 @@ const LAUNCHER_EXIT_GRACE: std::time::Duration = std::time::Duration::from_milli
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let t_run = std::time::Instant::now();
     let launcher = crate::launcher::Launcher::now();
-    messages::services::validate_rig_name(&opts.rig).map_err(anyhow::Error::msg)?;
+    messages::services::validate_rig_name(&opts.rig)?;
     let scenario = Scenario::load(&opts.scenario_path)?;
     let scenario_text =
         std::fs::read_to_string(&opts.scenario_path).with_context(|| format!("reading {}", opts.scenario_path.display()))?;

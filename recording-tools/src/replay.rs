@@ -235,7 +235,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
         bail!("--speed must be a positive number, got {speed}");
     }
     let rig = args.rig.clone().unwrap_or_else(|| format!("replay-{}", std::process::id()));
-    messages::services::validate_rig_name(&rig).map_err(anyhow::Error::msg)?;
+    messages::services::validate_rig_name(&rig)?;
     let tmp_dir = std::env::temp_dir().join(format!("rig-replay-{}", std::process::id()));
 
     // The replay is the rig's plant: not on a rig whose plant runs (nor may one start meanwhile).

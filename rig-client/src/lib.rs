@@ -19,7 +19,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use messages::liveness::{PeerWatch, Watched};
-use messages::ports::{ControllerPorts, Wake};
+use messages::ports::{ControllerPorts, Wake, WithCauses};
 use messages::{state_flags, ControllerDiagnostics, JointState, JointTorque, PlantStatus, Wrench, CONTRACT_VERSION};
 use robot::Vec6;
 
@@ -313,9 +313,9 @@ fn open(rig: &str, role: &str, scenario_path: Option<&str>, timeout: Duration) -
     messages::services::validate_rig_name(rig).map_err(|e| fail(RIG_ERR_INVALID_ARGUMENT, format!("rig-client: {e}")))?;
     // A killed peer leaves its shared memory behind.
     messages::ports::clean_dead_nodes();
-    let ports = ControllerPorts::open(rig, role).map_err(|e| fail(RIG_ERR_OPEN, format!("rig-client: {e}")))?;
-    let watch =
-        PeerWatch::spawn(rig, &format!("{role}-watch"), Watched::Plant).map_err(|e| fail(RIG_ERR_OPEN, format!("rig-client: {e}")))?;
+    let ports = ControllerPorts::open(rig, role).map_err(|e| fail(RIG_ERR_OPEN, format!("rig-client: {}", WithCauses(&e))))?;
+    let watch = PeerWatch::spawn(rig, &format!("{role}-watch"), Watched::Plant)
+        .map_err(|e| fail(RIG_ERR_OPEN, format!("rig-client: {}", WithCauses(&e))))?;
     let until = Instant::now() + timeout;
     while !ports.state_pending() {
         if Instant::now() >= until {
@@ -472,7 +472,7 @@ impl RigClient {
                 self.last_published = Some(self.last_published.map_or(tick, |l| l.max(tick)));
                 RIG_OK
             }
-            Err(e) => fail(RIG_ERR_PUBLISH, format!("rig-client: {e}")),
+            Err(e) => fail(RIG_ERR_PUBLISH, format!("rig-client: {}", WithCauses(&e))),
         }
     }
 

@@ -110,14 +110,44 @@ impl Integrator {
     }
 }
 
+/// How the substrate holds the strip's bottom face (DESIGN section 4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Boundary {
+    /// All bottom DOFs fixed (double-sided tape).
+    #[default]
+    Bonded,
+    /// Bottom normal fixed, frictionless in-plane.
+    Sliding,
+}
+
+impl Boundary {
+    /// The name used in scenario files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Boundary::Bonded => "bonded",
+            Boundary::Sliding => "sliding",
+        }
+    }
+}
+
+impl Mode {
+    /// Every mode, in the order the help lists them.
+    pub const ALL: [Mode; 2] = [Mode::Realtime, Mode::Lockstep];
+
+    /// The name used in scenario files, on command lines and in summaries.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Realtime => "realtime",
+            Mode::Lockstep => "lockstep",
+        }
+    }
+}
+
 impl std::str::FromStr for Mode {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "realtime" => Ok(Mode::Realtime),
-            "lockstep" => Ok(Mode::Lockstep),
-            other => Err(format!("unknown mode {other:?}: expected realtime or lockstep")),
-        }
+        Mode::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| format!("unknown mode {s:?}: expected realtime or lockstep"))
     }
 }
 
@@ -343,8 +373,8 @@ pub struct StripConfig {
     pub density_kg_m3: f64,
     /// Reduced model order (states).
     pub order: usize,
-    /// "bonded" or "sliding".
-    pub boundary: String,
+    /// How the substrate holds the bottom face.
+    pub boundary: Boundary,
     /// Craig–Bampton fixed-interface mode cut-off, Hz.
     pub cutoff_hz: f64,
     /// Rayleigh damping B = alpha M + beta K (5.24).
@@ -369,7 +399,7 @@ impl Default for StripConfig {
             poisson: 0.49,
             density_kg_m3: 1080.0,
             order: 250,
-            boundary: "bonded".into(),
+            boundary: Boundary::Bonded,
             cutoff_hz: 2500.0,
             damping_alpha: 60.0,
             damping_beta: 3e-6,
@@ -664,6 +694,15 @@ mod tests {
         assert_eq!(s.loop_.integrator.name(), "rk4");
         let e = Scenario::from_toml_str("[loop]\nintegrator = \"euler\"\n", Path::new("t.toml")).unwrap_err().to_string();
         assert!(e.contains("line 2") && e.contains("euler"), "{e}");
+    }
+
+    #[test]
+    fn boundary_is_named_in_the_file_and_unknown_names_are_refused_with_their_line() {
+        let s = Scenario::from_toml_str("[strip]\nboundary = \"sliding\"\n", Path::new("t.toml")).unwrap();
+        assert_eq!(s.strip.boundary, Boundary::Sliding);
+        assert_eq!(Scenario::default().strip.boundary, Boundary::Bonded);
+        let e = Scenario::from_toml_str("[strip]\nboundary = \"glued\"\n", Path::new("t.toml")).unwrap_err().to_string();
+        assert_eq!(e, "scenario file t.toml, line 2: field strip.boundary = \"glued\": must be one of \"bonded\", \"sliding\"");
     }
 
     #[test]
