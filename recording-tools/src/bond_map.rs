@@ -15,7 +15,10 @@
 use serde::Serialize;
 
 use crate::read::Recording;
-use crate::report::BOND_PRESSURE_PA;
+use crate::tracking_input::tracking_ticks;
+
+/// The bond needs at least this bottom pressure under the wheel (thesis Section 4.2, Appendix C).
+pub const BOND_PRESSURE_PA: f64 = 100e3;
 
 /// Grid of the bond map along the strip, m.
 pub const BOND_MAP_STEP_M: f64 = 1e-3;
@@ -161,7 +164,7 @@ pub fn bond_map(rec: &Recording) -> Option<BondMap> {
     let step = BOND_MAP_STEP_M;
     let peak = peak_on_grid((0..rec.strip.len()).map(|i| (rec.strip_row_z(i), &rec.strip[i].centreline_pressure_pa[..])), length_m, step);
 
-    let ticks = crate::report::tracking_ticks(rec);
+    let ticks = tracking_ticks(rec);
     let roll = crate::tracking::rolling_ticks(&ticks);
     let errors: Vec<(f64, f64)> = roll.iter().filter_map(|&i| ticks[i].force_error_n().map(|e| (ticks[i].wheel_z_m, e))).collect();
     let (rolled_from_m, rolled_to_m) = match (roll.first(), roll.last()) {

@@ -5,7 +5,9 @@
 //! - [`read::Recording`] reads a file back, checking every chunk's CRC (a cut or corrupt file up to
 //!   its first bad chunk, saying where and why).
 //! - [`report`] turns a recording into numbers and figures.
-//! - [`tracking`] is the rolling-phase force-tracking metric, one rule for every caller.
+//! - [`tracking`] is the rolling-phase force-tracking metric, one rule for every caller;
+//!   [`tracking_input`] reads a recording's ticks into it.
+//! - [`bond_map`] is a long seal's bond map: the peak pressure at each millimetre of the strip.
 //! - [`compare`] puts several recordings side by side.
 //! - [`replay`] drives a controller open-loop from a recording and compares its torques.
 //! - [`attribution`] says whose fault each missed tick of a real-time run is.
@@ -22,3 +24,4 @@ pub mod replay;
 pub mod report;
 pub mod tmpfs_test;
 pub mod tracking;
+pub mod tracking_input;
