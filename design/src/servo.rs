@@ -107,7 +107,7 @@ pub fn run_servo_full(s: &Scenario, cache_dir: &Path, duration_s: f64) -> anyhow
         if !torque.tau.iter().all(|x| x.is_finite()) {
             anyhow::bail!("non-finite torque at tick {tick}");
         }
-        let strip = plant.advance(Some(&torque), None).strip;
+        let strip = plant.advance(Some(&torque)).strip;
         for (p, &x) in peak.iter_mut().zip(&strip.centreline_pressure_pa[..strip.n_centreline as usize]) {
             *p = p.max(x);
         }

@@ -27,7 +27,8 @@ pub const SWEEP_COMPRESSION_LEVEL: u32 = 1;
 /// One in-process run of the scenario at `scenario_path` for `duration_s` (None: the scenario's,
 /// or its nominal trajectory), recorded to `recording` when the scenario records, with the
 /// writer's `tuning`. `physics` builds the plant (a sweep shares the strip tables across its
-/// cases). Returns the plant's summary, the JSON `plant-sim` prints.
+/// cases). `signals`: a stop ends the run after the current tick. Returns the plant's summary,
+/// the JSON `plant-sim` prints.
 pub fn run(
     rig: &str,
     scenario_path: &Path,
@@ -35,6 +36,7 @@ pub fn run(
     recording: &Path,
     tuning: recordings::RecorderTuning,
     physics: impl FnOnce(&Scenario) -> anyhow::Result<Physics>,
+    signals: plant_sim::signals::Signals,
 ) -> anyhow::Result<serde_json::Value> {
     let s = Scenario::load(scenario_path)?;
     anyhow::ensure!(!s.egm.enabled, "--in-process: {} enables [egm]; the EGM path runs with its daemons only", scenario_path.display());
@@ -59,14 +61,17 @@ pub fn run(
     }
     let started = Instant::now();
     let mut stats = LoopStats::empty();
+    let mut hand_on = plant_sim::tick_events::EventHandOn::new(plant.period_ns());
     while plant.tick() < n_ticks {
-        if plant_sim::rt::stop_requested() {
+        if signals.stop_requested() {
             stats.stopped_by_signal = true;
             break;
         }
         let (state, wrench) = plant.outputs();
         let (torque, diag) = controller.process(&state, &wrench);
-        let outcome = plant.advance(Some(&torque), recorder.as_mut());
+        plant_sim::loop_lockstep::make_room_for_tick(recorder.as_mut());
+        let outcome = plant.advance(Some(&torque));
+        hand_on.hand_on(&outcome.events, recorder.as_mut());
         if let Some(r) = recorder.as_mut() {
             let timing = TimingRecord { missed: outcome.decision.missed, ..TimingRecord::default() };
             r.record_tick_commanded(&plant_sim::tick::tick_record(state, wrench, &outcome, Some(diag), timing), Some(&torque));

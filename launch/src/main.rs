@@ -422,12 +422,12 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
     let parsed = scenarios::Scenario::load(scenario)?;
     check_duration("--duration", duration_s, &parsed, scenario)?;
     std::fs::create_dir_all(dir).with_context(|| format!("--out {}: creating the output directory", dir.display()))?;
-    plant_sim::rt::install_stop_signals();
+    let signals = plant_sim::signals::Signals::install_stop_only();
     let cache_dir = strip::cache::cache_dir();
     eprintln!("rig {rig}: plant tick + controller step in process (lockstep, no daemons), scenario {}", scenario.display());
     let recording = dir.join("run.mcap");
     let tuning = recordings::RecorderTuning::default();
-    let v = in_process::run(rig, scenario, duration_s, &recording, tuning, |s| plant_sim::physics::Physics::new(s, &cache_dir))?;
+    let v = in_process::run(rig, scenario, duration_s, &recording, tuning, |s| plant_sim::physics::Physics::new(s, &cache_dir), signals)?;
     print!("{}", summary::run_summary(&v));
     let numbers = match recording_tools::cli::summary_numbers(&recording) {
         Ok(n) => Some(n),
@@ -495,14 +495,14 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
         done
     } else {
         // The built-in controller: every case in process, one per core at a time.
-        plant_sim::rt::install_stop_signals();
+        let signals = plant_sim::signals::Signals::install_stop_only();
         let cache_dir = strip::cache::cache_dir();
         let strips = sweep::SharedStrips::new(&cache_dir);
         sweep::run_cases(&planned, |n, (case_dir, path, label)| {
             let recording = case_dir.join("run.mcap");
             let rig = format!("sweep-case-{n:02}");
             let tuning = recordings::RecorderTuning { compression_level: in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
-            let summary = in_process::run(&rig, path, a.launch.duration, &recording, tuning, |s| strips.physics(s));
+            let summary = in_process::run(&rig, path, a.launch.duration, &recording, tuning, |s| strips.physics(s), signals);
             let (ending, summary) = match summary {
                 Ok(v) if v["stopped_by_signal"].as_bool() == Some(true) => (Ending::Interrupted, Some(v)),
                 Ok(v) => (Ending::Completed, Some(v)),

@@ -119,12 +119,12 @@ fn catches_signal(pid: u32, sig: i32) -> bool {
 }
 
 /// Tell the plant that the controller process ended (`sigqueue(SIGUSR1)` with
-/// `plant_sim::rt::encode_controller_end` as the value, which `plant_sim::rt` reads from
+/// `plant_sim::signals::encode_controller_end` as the value, which `plant_sim::signals` reads from
 /// `si_value.sival_ptr`): it enters the safe stop and records "controller process ended (...)".
 /// Not before the plant has installed its handler (a SIGUSR1 would kill it): a plant still starting
 /// up has no loop to safe-stop. Returns whether the plant was told.
 fn report_controller_end(plant: &Child, status: ExitStatus) -> bool {
-    use plant_sim::rt::ControllerEnd;
+    use plant_sim::signals::ControllerEnd;
     use std::os::unix::process::ExitStatusExt;
     let end = match (status.code(), status.signal()) {
         (Some(c), _) => ControllerEnd::Exit(c),
@@ -134,14 +134,14 @@ fn report_controller_end(plant: &Child, status: ExitStatus) -> bool {
     send_controller_end(plant, end)
 }
 
-/// Queue `end` to the plant (SIGUSR1 with [`plant_sim::rt::encode_controller_end`]'s value), once
+/// Queue `end` to the plant (SIGUSR1 with [`plant_sim::signals::encode_controller_end`]'s value), once
 /// its handler is installed. Also how rig reports a controller that never connected.
-fn send_controller_end(plant: &Child, end: plant_sim::rt::ControllerEnd) -> bool {
+fn send_controller_end(plant: &Child, end: plant_sim::signals::ControllerEnd) -> bool {
     let Some(pid) = plant.id() else { return false };
     if !catches_signal(pid, libc::SIGUSR1) {
         return false;
     }
-    let value = libc::sigval { sival_ptr: plant_sim::rt::encode_controller_end(end) as isize as usize as *mut libc::c_void };
+    let value = libc::sigval { sival_ptr: plant_sim::signals::encode_controller_end(end) as isize as usize as *mut libc::c_void };
     // SAFETY: queueing a signal to our own child, which is not reaped yet (its pid is ours).
     if unsafe { libc::sigqueue(pid as i32, libc::SIGUSR1, value) } != 0 {
         tracing::warn!("could not tell plant-sim that the controller ended: {}", std::io::Error::last_os_error());
@@ -364,7 +364,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
             );
             // Said at once; then the plant records it (/events) and both are stopped.
             eprintln!("rig: CONTROLLER NEVER CONNECTED: {sentence}");
-            send_controller_end(&plant, plant_sim::rt::ControllerEnd::NeverConnected { pid, seen: seen.code() });
+            send_controller_end(&plant, plant_sim::signals::ControllerEnd::NeverConnected { pid, seen: seen.code() });
             let _ = tokio::time::timeout(CONTROLLER_END_GRACE, plant.wait()).await;
             let (_, _) = tokio::join!(stop(&mut plant, Duration::from_secs(10)), stop(&mut controller, Duration::from_secs(1)));
             Ending::NeverConnected(sentence)

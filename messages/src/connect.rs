@@ -36,7 +36,7 @@ pub enum NotConnected {
 }
 
 impl NotConnected {
-    /// A code for the plant's `/events` entry (`plant_sim::rt::ControllerEnd::NeverConnected`).
+    /// A code for the plant's `/events` entry (`plant_sim::signals::ControllerEnd::NeverConnected`).
     pub fn code(&self) -> u8 {
         match self {
             NotConnected::NoNode => 0,

@@ -198,6 +198,12 @@ impl Gate {
         self.controller_id
     }
     /// Torque applied over the last tick.
+    /// EGM: the robot controller's own servo applied `tau` (no controller answer went through
+    /// the gate); the next state reports it as applied.
+    pub fn servo_applied(&mut self, tau: Vec6) {
+        self.last_applied = tau;
+    }
+
     pub fn last_applied(&self) -> Vec6 {
         self.last_applied
     }

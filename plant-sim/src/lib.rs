@@ -13,16 +13,19 @@ pub mod launcher;
 pub mod limits;
 pub mod loop_lockstep;
 pub mod loop_rt;
+pub mod pacer;
 pub mod physics;
 pub mod probe;
 pub mod rng;
 pub mod rt;
 pub mod run;
 pub mod sensor;
+pub mod signals;
 mod stack_text;
 pub mod stats;
 pub mod table_cache;
 pub mod tick;
+pub mod tick_events;
 
 pub use tick::PlantTick;
 

@@ -16,12 +16,28 @@ use std::time::{Duration, Instant};
 use messages::PlantStatus;
 
 use crate::loop_rt::{PlantLoop, Wait};
-use crate::recording::EventKind;
+use crate::recording::{EventKind, Recorder};
 use crate::rt;
 use crate::stats::LoopStats;
 
 /// How long a lockstep plant republishes the waiting state while no controller has answered yet.
 const LOCKSTEP_REPUBLISH: Duration = Duration::from_millis(5);
+
+/// Queue slots a lockstep tick waits for before it advances: its tick record and the events one
+/// tick can raise ([`crate::tick_events::TICK_EVENTS_MAX`] and the driver's own) with room to spare.
+const LOCKSTEP_RECORD_SLOTS: usize = 16;
+/// The longest a lockstep tick waits for the writer; after that the record is a counted drop
+/// (a writer that no longer drains its queue must not hang the run).
+const LOCKSTEP_RECORD_WAIT: Duration = Duration::from_secs(2);
+
+/// Lockstep has no deadline: before a tick advances, wait for the writer (on a loaded host it
+/// falls behind a plant running 30x real time) instead of dropping the tick's record and events.
+/// Every lockstep driver (daemons and in process) calls it; real time never waits.
+pub fn make_room_for_tick(recorder: Option<&mut Recorder>) {
+    if let Some(r) = recorder {
+        r.wait_for_room(LOCKSTEP_RECORD_SLOTS, LOCKSTEP_RECORD_WAIT);
+    }
+}
 
 impl PlantLoop<'_> {
     /// The lockstep loop: run until `n_ticks` ticks are integrated or a stop signal arrives.
@@ -32,7 +48,7 @@ impl PlantLoop<'_> {
         let mut paced = false;
         let mut tick: u64 = self.plant.tick();
         while tick < p.n_ticks {
-            if rt::stop_requested() {
+            if self.signals.stop_requested() {
                 run.stats.stopped_by_signal = true;
                 break;
             }
@@ -49,7 +65,7 @@ impl PlantLoop<'_> {
                 // Start-up: hold tick 0 until a controller answers it.
                 let end = pb.budget_end_ns(&p);
                 // rig's report that the controller ended (or never connected) ends it too.
-                while !rt::stop_requested() && !rt::controller_end_pending() {
+                while !self.signals.stop_requested() && !self.signals.controller_end_pending() {
                     let lost = self.wait_for_answers(tick, Instant::now() + LOCKSTEP_REPUBLISH, &mut run.answers, Wait::Watchdog);
                     run.stats.note_lost_wakeups(lost);
                     if !run.answers.is_empty() {
@@ -70,7 +86,7 @@ impl PlantLoop<'_> {
             if !paced && decision.missed && applied.torque.is_none() {
                 // Watchdog expired: pace in real time until a controller answers again.
                 paced = true;
-                run.next_deadline_ns = rt::now_mono_ns() + p.period_ns;
+                run.pacer.restart_at(rt::now_mono_ns() + p.period_ns);
                 let text = if run.gone_reported {
                     "the controller is gone: pacing in real time until a controller answers"
                 } else {
@@ -85,7 +101,7 @@ impl PlantLoop<'_> {
             self.record(&mut run, &pb, &applied, budget_end_ns, budget_ns);
             tick += 1;
             if paced {
-                run.next_deadline_ns += p.period_ns;
+                run.pacer.next();
             }
         }
         self.finish(run, tick)

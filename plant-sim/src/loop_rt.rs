@@ -28,6 +28,9 @@ use crate::rt;
 use crate::stack_text::StackText;
 use crate::stats::LoopStats;
 use crate::tick::{PlantTick, TickOutcome};
+use crate::pacer::Pacer;
+use crate::signals::{ControllerEnd, Signals};
+use crate::tick_events::EventHandOn;
 
 /// Loop parameters.
 #[derive(Debug, Clone, Copy)]
@@ -55,6 +58,8 @@ pub struct PlantLoop<'a> {
     pub watch: Option<&'a PeerWatch>,
     /// The host-floor probe's latest wake-up, read once per tick (None: no probe).
     pub probe: Option<&'a crate::probe::Latest>,
+    /// Stop requests and `rig`'s reports of the controller's end.
+    pub signals: Signals,
 }
 
 /// How long [`PlantLoop::wait_for_answers`] waits: see there.
@@ -75,18 +80,17 @@ pub(crate) struct RunState {
     pub(crate) answers: Answers,
     /// The controller's end was reported (and not yet followed by a takeover).
     pub(crate) gone_reported: bool,
-    /// (tick, overruns) of the last overrun log line: at most one per second of ticks.
-    last_overrun_log: Option<(u64, u64)>,
-    ticks_per_s: u64,
     /// One reference instant for both clocks: Instant is CLOCK_MONOTONIC on Linux.
     origin: Instant,
     origin_ns: u64,
     origin_wall_ns: u64,
-    /// Next deadline of the paced ticks, CLOCK_MONOTONIC ns.
-    pub(crate) next_deadline_ns: u64,
+    /// The grid of the paced ticks.
+    pub(crate) pacer: Pacer,
     last_publish_ns: u64,
     /// (publish time, tick) of the first tick a controller answered.
     first_answer: Option<(u64, u64)>,
+    /// The plant's tick events to the recorder and the log.
+    pub(crate) hand_on: EventHandOn,
 }
 
 impl RunState {
@@ -156,41 +160,20 @@ impl PlantLoop<'_> {
             stats: LoopStats::empty(),
             answers: Answers::default(),
             gone_reported: false,
-            last_overrun_log: None,
-            ticks_per_s: 1_000_000_000 / p.period_ns.max(1),
             origin,
             origin_ns,
             origin_wall_ns,
-            next_deadline_ns,
+            pacer: Pacer::new(next_deadline_ns, p.period_ns),
             last_publish_ns: 0,
             first_answer: None,
+            hand_on: EventHandOn::new(p.period_ns),
         }
     }
 
-    /// Real-time pacing: the deadline of `tick`, skipping ahead after a stall (the skipped
-    /// periods counted as overruns and recorded), slept until. Returns (deadline, periods
-    /// skipped now).
+    /// Real-time pacing: the deadline of `tick` on the run's grid, slept until (see [`Pacer::pace`]).
+    /// Returns (deadline, periods skipped now).
     pub(crate) fn pace(&mut self, run: &mut RunState, tick: u64) -> (u64, u64) {
-        let p = self.params;
-        let now = rt::now_mono_ns();
-        let (deadline, skipped) = skip_ahead(now, run.next_deadline_ns, p.period_ns);
-        if skipped > 0 {
-            let late_us = (now - run.next_deadline_ns) / 1000;
-            run.next_deadline_ns = deadline;
-            run.stats.overruns += skipped;
-            let mut s = StackText::new();
-            let _ = write!(s, "tick {tick}: loop {late_us} us late, skipped {skipped} periods");
-            // Overruns come in bursts on a stalling host: each is recorded in `/events`, but this
-            // SCHED_FIFO thread writes at most one log line per second of ticks about them.
-            if run.last_overrun_log.is_none_or(|(l, _)| tick >= l + run.ticks_per_s) {
-                let since = run.last_overrun_log.map_or(0, |(_, n)| n);
-                tracing::warn!("{} ({} overrun(s) since the last such line)", s.as_str(), run.stats.overruns - since);
-                run.last_overrun_log = Some((tick, run.stats.overruns));
-            }
-            self.event(tick, self.sim_time_s(tick), EventKind::Info, s.as_str());
-        }
-        rt::sleep_until_mono_ns(run.next_deadline_ns);
-        (run.next_deadline_ns, skipped)
+        run.pacer.pace(tick, &mut run.stats, self.recorder.as_deref_mut())
     }
 
     /// Publish state and wrench of `tick` (due at `deadline_ns`), and empty the answers buffer
@@ -275,10 +258,10 @@ impl PlantLoop<'_> {
             if settled(answers) {
                 return lost + u64::from(unwoken > 0);
             }
-            if rt::stop_requested() {
+            if self.signals.stop_requested() {
                 return lost;
             }
-            if wait == Wait::Watchdog && (rt::controller_end_pending() || self.active_gone()) {
+            if wait == Wait::Watchdog && (self.signals.controller_end_pending() || self.active_gone()) {
                 return lost;
             }
             let now = Instant::now();
@@ -340,30 +323,36 @@ impl PlantLoop<'_> {
 
         // A controller that is gone (rig reports its process ended, or the watcher saw its
         // node dead) and was not replaced: safe stop now, not after max_consecutive_misses.
-        let ended = rt::take_controller_end();
+        let ended = self.signals.take_controller_end();
         let still_gone = arb_events.takeover.is_none() && torque.is_none() && active_gone;
         if ended.is_some() || (still_gone && !run.gone_reported) {
             run.stats.controller_ended = true;
             run.gone_reported = true;
             let mut s = StackText::new();
             let _ = match ended {
-                Some(end @ rt::ControllerEnd::NeverConnected { .. }) => write!(s, "tick {tick}: the controller {end}"),
+                Some(end @ ControllerEnd::NeverConnected { .. }) => write!(s, "tick {tick}: the controller {end}"),
                 Some(end) => write!(s, "tick {tick}: controller process ended ({end})"),
                 None => write!(s, "tick {tick}: the active controller's node is dead"),
             };
             tracing::error!("{}", s.as_str());
             self.event(tick, sim_t, EventKind::ControllerEnded, s.as_str());
-            self.plant.controller_gone(self.recorder.as_deref_mut());
+            if let Some(e) = self.plant.controller_gone() {
+                run.hand_on.one(&e, self.recorder.as_deref_mut());
+            }
         }
         if arb_events.takeover.is_some() {
             run.gone_reported = false;
         }
         // Stopping (after the controller-end report above is recorded).
-        if rt::stop_requested() && torque.is_none() {
+        if self.signals.stop_requested() && torque.is_none() {
             run.stats.stopped_by_signal = true;
             return None;
         }
-        let outcome = self.plant.advance(torque.as_ref(), self.recorder.as_deref_mut());
+        if self.plant.is_lockstep() {
+            crate::loop_lockstep::make_room_for_tick(self.recorder.as_deref_mut());
+        }
+        let outcome = self.plant.advance(torque.as_ref());
+        run.hand_on.hand_on(&outcome.events, self.recorder.as_deref_mut());
         Some(Applied { torque, outcome, recv_ns, recv_wall_ns, diag, late_diag })
     }
 
@@ -452,7 +441,7 @@ impl PlantLoop<'_> {
         let mut run = self.start();
         let mut tick: u64 = self.plant.tick();
         while tick < p.n_ticks {
-            if rt::stop_requested() {
+            if self.signals.stop_requested() {
                 run.stats.stopped_by_signal = true;
                 break;
             }
@@ -465,56 +454,8 @@ impl PlantLoop<'_> {
             let Some(applied) = self.apply(&mut run, tick, &pb) else { break };
             self.record(&mut run, &pb, &applied, budget_end_ns, p.budget_ns);
             tick += 1;
-            run.next_deadline_ns += p.period_ns;
+            run.pacer.next();
         }
         self.finish(run, tick)
-    }
-}
-
-/// The deadline to run next after waking at `now_ns` for `next_deadline_ns`, and the number of
-/// whole periods skipped. Up to one period late, the tick runs late and the next ones catch up
-/// on the grid; later than that (a VM stall), the missed deadlines are dropped so the loop lands
-/// on the grid slot just before `now` instead of running a burst of back-to-back ticks.
-fn skip_ahead(now_ns: u64, next_deadline_ns: u64, period_ns: u64) -> (u64, u64) {
-    if now_ns > next_deadline_ns + period_ns {
-        let skipped = (now_ns - next_deadline_ns) / period_ns;
-        (next_deadline_ns + skipped * period_ns, skipped)
-    } else {
-        (next_deadline_ns, 0)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::skip_ahead;
-
-    const T: u64 = 1_000_000;
-
-    #[test]
-    fn on_time_and_slightly_late_ticks_keep_their_deadline() {
-        let d = 5 * T;
-        assert_eq!(skip_ahead(d - 300_000, d, T), (d, 0));
-        assert_eq!(skip_ahead(d + 999_999, d, T), (d, 0));
-        assert_eq!(skip_ahead(d + T, d, T), (d, 0));
-    }
-
-    #[test]
-    fn a_stall_skips_whole_periods_and_lands_on_the_grid_before_now() {
-        let d = 7 * T + 123; // grid phase 123 ns
-                             // 3.4 periods late: 3 deadlines dropped, the next one is 0.4 periods in the past.
-        let (d2, k) = skip_ahead(d + 3_400_000, d, T);
-        assert_eq!((d2, k), (d + 3 * T, 3));
-        // Any lateness beyond a period: on the grid, not after now, less than a period before it.
-        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
-        for _ in 0..10_000 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            let late = T + 1 + x % (50 * T);
-            let (d2, k) = skip_ahead(d + late, d, T);
-            assert_eq!((d2 - d) % T, 0);
-            assert_eq!(d2, d + k * T);
-            assert!(k >= 1 && d2 <= d + late && d + late - d2 < T, "late {late}: deadline {d2}, skipped {k}");
-        }
     }
 }

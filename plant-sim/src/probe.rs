@@ -125,7 +125,7 @@ fn run(cpu: usize, period_ns: u64, latest: &Latest, stop: &AtomicBool) -> CpuRep
     // Wait for the plant's grid (its loop starts after the probe), polling each period.
     let grid = loop {
         let g = latest.grid_ns.load(Ordering::Relaxed);
-        if g != 0 || stop.load(Ordering::Relaxed) || rt::stop_requested() {
+        if g != 0 || stop.load(Ordering::Relaxed) {
             break g;
         }
         rt::sleep_until_mono_ns(rt::now_mono_ns() + period_ns);
@@ -135,7 +135,7 @@ fn run(cpu: usize, period_ns: u64, latest: &Latest, stop: &AtomicBool) -> CpuRep
     let phase = grid + period_ns / 2;
     let now = rt::now_mono_ns();
     let mut next = phase + now.saturating_sub(phase).div_ceil(period_ns) * period_ns;
-    while grid != 0 && !stop.load(Ordering::Relaxed) && !rt::stop_requested() {
+    while grid != 0 && !stop.load(Ordering::Relaxed) {
         rt::sleep_until_mono_ns(next);
         let woke = rt::now_mono_ns();
         let late = woke.saturating_sub(next);

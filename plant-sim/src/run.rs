@@ -234,11 +234,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     if cleaned > 0 {
         tracing::info!("removed the shared-memory leftovers of {cleaned} dead iceoryx2 node(s)");
     }
-    rt::install_stop_signals();
-    rt::install_controller_end_signal();
+    let signals = crate::signals::Signals::install();
 
     let t_setup = std::time::Instant::now();
-    let mut physics = Physics::new(&scenario, &opts.cache_dir)?;
+    let physics = Physics::new(&scenario, &opts.cache_dir)?;
     let t_physics = t_setup.elapsed();
     let ports = messages::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
     // Liveness of the controllers' nodes, on its own thread (started before the loop's real-time
@@ -344,7 +343,8 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let (stats, egm) = if scenario.egm.enabled {
         let ep = crate::egm::EgmParams::from_scenario(&scenario, mode, params.n_ticks)?;
         tracing::info!(sensor = %ep.sensor, "EGM: sending EgmRobot every {} s", scenario.egm.cycle_s);
-        let (stats, es) = crate::egm::EgmLoop::new(&scenario, &mut physics, recorder.as_mut(), ep)?.run();
+        let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode);
+        let (stats, es) = crate::egm::EgmLoop::new(&scenario, &mut plant, recorder.as_mut(), ep, signals)?.run();
         (stats, Some(es))
     } else {
         let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode);
@@ -356,6 +356,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
             arbiter: &mut arbiter,
             watch: Some(&watch),
             probe: probe.as_ref().map(|p| &*p.latest),
+            signals,
         };
         let stats = match mode {
             Mode::Realtime => plant_loop.run_realtime(),

@@ -1,15 +1,17 @@
 //! A short text on the stack for the rare events of the 1 kHz loops: formatted with `write!`,
 //! cut at its capacity on a char boundary, never touching the heap.
 
-/// A short text on the stack for rare events (no heap allocation).
+use recordings::EVENT_TEXT_MAX;
+
+/// A short text on the stack for rare events (no heap allocation), as long as an `/events` text.
 pub(crate) struct StackText {
-    buf: [u8; 192],
+    buf: [u8; EVENT_TEXT_MAX],
     len: usize,
 }
 
 impl StackText {
     pub(crate) fn new() -> Self {
-        StackText { buf: [0; 192], len: 0 }
+        StackText { buf: [0; EVENT_TEXT_MAX], len: 0 }
     }
     pub(crate) fn as_str(&self) -> &str {
         std::str::from_utf8(&self.buf[..self.len]).unwrap_or("")

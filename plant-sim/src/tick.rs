@@ -1,24 +1,27 @@
 //! One plant tick as a value: [`PlantTick`] holds the physics, the torque gate and the limits
 //! between ticks. [`PlantTick::outputs`] gives the tick's joint state and wrench (what the plant
 //! publishes); [`PlantTick::advance`] applies the torque received for it (or none) through the
-//! gate, integrates the tick, checks the reflexes and end stops and gives what was applied and
-//! the strip record. The real-time loop (`loop_rt.rs`), the lockstep loop (`loop_lockstep.rs`),
-//! `rig run --in-process` and `rig sweep` drive this one type: the loops add only pacing, ports
-//! and the recorder hand-off.
+//! gate, integrates the tick, checks the reflexes and end stops and gives what was applied, the
+//! strip record and the tick's rare events. EGM's motion controller applies its own servo torque
+//! through [`PlantTick::advance_servo`], with the same integration, sensors, reflexes and end
+//! stops. The real-time loop (`loop_rt.rs`), the lockstep loop (`loop_lockstep.rs`), the EGM loop
+//! (`egm/`), `rig run --in-process`, `rig sweep` and the design servo drive this one type: the
+//! drivers add only pacing, ports and the hand-off of records and events.
 //!
-//! Per tick: no allocation (`tests/tests/no_alloc.rs` counts), no lock; rare events (miss streak, safe stop, reflex, end stop,
-//! refusal, controller change) go to the recorder's wait-free queue and, rate-limited, the log.
-
-use std::fmt::Write as _;
+//! Per tick: no allocation (`tests/tests/no_alloc.rs` counts), no lock, no recording, no logging
+//! and no waiting: rare events (miss streak, safe stop, reflex, end stop, refusal, controller
+//! change) come back in [`TickOutcome::events`] for the driver to hand on
+//! ([`crate::tick_events::EventHandOn`]).
 
 use messages::{state_flags, ControllerDiagnostics, JointState, JointTorque, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
+use robot::Vec6;
 use scenarios::{Mode, Scenario};
 
-use crate::gate::{Decision, Gate, GateConfig};
+use crate::gate::{Decision, Gate, GateConfig, GateEvents};
 use crate::limits::ReflexLimits;
 use crate::physics::Physics;
-use crate::recording::{EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
-use crate::stack_text::StackText;
+use crate::recording::{StripRecord, TickRecord, TimingRecord};
+use crate::tick_events::{PlantEvent, Raised, SafeStopCause, TickEvents};
 
 /// What one [`PlantTick::advance`] applied and measured.
 #[derive(Debug, Clone, Copy)]
@@ -29,6 +32,8 @@ pub struct TickOutcome {
     pub applied: JointTorque,
     /// The strip after the tick was integrated (as recorded with the tick).
     pub strip: StripRecord,
+    /// What the tick raised, for the driver to record and log.
+    pub events: TickEvents,
 }
 
 /// The first tick of a safe stop, a reflex, a refused torque (the exit status' story).
@@ -38,13 +43,6 @@ pub struct FirstTicks {
     pub reflex: Option<u64>,
     pub refusal: Option<u64>,
 }
-
-/// Queue slots a lockstep tick waits for before it advances: its tick record and the events one
-/// tick can raise (a decision's, a reflex's, an end stop's) with room to spare.
-const LOCKSTEP_RECORD_SLOTS: usize = 16;
-/// The longest a lockstep tick waits for the writer; after that the record is a counted drop
-/// (a writer that no longer drains its queue must not hang the run).
-const LOCKSTEP_RECORD_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// The plant between ticks: physics, gate, limits and what the next state reports.
 pub struct PlantTick {
@@ -60,8 +58,6 @@ pub struct PlantTick {
     /// Tick of the state whose answer was last applied (`/joint_torque.answered_tick`).
     applied_answer_tick: u64,
     in_end_stop: Option<usize>,
-    /// Tick of the last miss/refusal log line (rate limit: one per second of ticks).
-    last_log_tick: Option<u64>,
     first: FirstTicks,
     strip: StripRecord,
     /// `[sensor]`: the force/torque sensor's chain and this tick's reading (None: exact wrench).
@@ -131,7 +127,6 @@ impl PlantTick {
             prev: None,
             applied_answer_tick: recordings::NEVER_ANSWERED,
             in_end_stop: None,
-            last_log_tick: None,
             first: FirstTicks::default(),
             strip: StripRecord::default(),
         }
@@ -228,28 +223,26 @@ impl PlantTick {
     }
 
     /// The active controller is gone (its process ended or its node is dead) and nobody took
-    /// over: safe stop now. Returns true if the plant entered it (recorded in `/events`).
-    pub fn controller_gone(&mut self, recorder: Option<&mut Recorder>) -> bool {
-        let entered = self.gate.controller_gone();
-        if entered {
-            let tick = self.tick;
-            let mut s = StackText::new();
-            let _ = write!(s, "tick {tick}: safe stop: the controller is gone (gravity compensation + joint damping)");
-            event(recorder, tick, self.sim_time_s(), EventKind::SafeStop, s.as_str());
-            self.first.safe_stop.get_or_insert(tick);
+    /// over: safe stop now. Returns the safe stop's event if the plant entered it.
+    pub fn controller_gone(&mut self) -> Option<Raised> {
+        if !self.gate.controller_gone() {
+            return None;
         }
-        entered
+        let tick = self.tick;
+        self.first.safe_stop.get_or_insert(tick);
+        Some(Raised { tick, sim_time_s: self.sim_time_s(), event: PlantEvent::SafeStop(SafeStopCause::ControllerGone) })
+    }
+
+    /// Whether the states say LOCKSTEP (a lockstep driver waits for its recorder, see
+    /// [`crate::loop_rt`]).
+    pub fn is_lockstep(&self) -> bool {
+        self.lockstep
     }
 
     /// Apply `torque` (this tick's answer, None if none came in time) through the gate,
     /// integrate the tick, check reflexes and end stops of the new state, and move on to the
     /// next tick.
-    pub fn advance(&mut self, torque: Option<&JointTorque>, mut recorder: Option<&mut Recorder>) -> TickOutcome {
-        // Lockstep has no deadline: wait for the writer (on a loaded host it falls behind a plant
-        // running 30x real time) instead of dropping this tick's record and events.
-        if let Some(r) = recorder.as_deref().filter(|_| self.lockstep) {
-            r.wait_for_room(LOCKSTEP_RECORD_SLOTS, LOCKSTEP_RECORD_WAIT);
-        }
+    pub fn advance(&mut self, torque: Option<&JointTorque>) -> TickOutcome {
         let tick = self.tick;
         let t = self.sim_time_s();
         let decision = self.gate.decide(torque, &self.physics.gravity_torque(), &self.physics.qd());
@@ -260,95 +253,75 @@ impl PlantTick {
             self.first.refusal.get_or_insert(tick);
         }
         let prev_refused = self.prev.as_ref().is_some_and(|d| d.refused.is_some());
-        self.report(tick, t, &decision, prev_refused, recorder.as_deref_mut());
-        self.physics.step_tick(&decision.tau);
-        let t_next = t + self.period_ns as f64 * 1e-9;
-        self.read_sensors(tick + 1, t_next, recorder.as_deref_mut());
-        self.check_limits(tick + 1, t_next, recorder);
-        self.physics.fill_strip_record(&mut self.strip);
+        let mut events = TickEvents::default();
+        self.gate_events(tick, t, &decision, prev_refused, &mut events);
         if let Some(a) = torque.filter(|_| !decision.held) {
             self.applied_answer_tick = a.tick;
         }
+        let status = torque.map_or(recordings::STATUS_NO_ANSWER, |a| a.controller_status);
+        self.integrate(decision, status, self.applied_answer_tick, events)
+    }
+
+    /// EGM: the robot controller's own motion servo applies `tau` (already within the joints'
+    /// limits) over this tick, as its answer to this tick; no controller, no gate. Integration,
+    /// sensors, reflexes and end stops are the torque path's.
+    pub fn advance_servo(&mut self, tau: &Vec6) -> TickOutcome {
+        let tick = self.tick;
+        self.gate.servo_applied(*tau);
+        let decision = Decision { tau: *tau, held: false, missed: false, refused: None, events: GateEvents::default() };
+        self.applied_answer_tick = tick;
+        self.integrate(decision, 0, tick, TickEvents::default())
+    }
+
+    /// Integrate `decision.tau` over the tick; the sensors, reflexes and end stops of the new
+    /// state, which is the next tick's; the record of what was applied.
+    fn integrate(&mut self, decision: Decision, controller_status: u32, answered_tick: u64, mut events: TickEvents) -> TickOutcome {
+        let tick = self.tick;
+        let t_next = self.sim_time_s() + self.period_ns as f64 * 1e-9;
+        self.physics.step_tick(&decision.tau);
+        self.read_sensors(tick + 1, t_next, &mut events);
+        self.check_limits(tick + 1, t_next, &mut events);
+        self.physics.fill_strip_record(&mut self.strip);
         let applied = JointTorque {
             contract_version: CONTRACT_VERSION,
-            controller_status: torque.map_or(recordings::STATUS_NO_ANSWER, |a| a.controller_status),
-            tick: self.applied_answer_tick,
+            controller_status,
+            tick: answered_tick,
             controller_id: self.gate.controller_id().unwrap_or(0),
             tau: decision.tau.into(),
         };
         self.prev = Some(decision);
         self.tick += 1;
-        TickOutcome { decision, applied, strip: self.strip }
+        TickOutcome { decision, applied, strip: self.strip, events }
     }
 
-    /// Turn the gate's rare events into recorded events and log lines.
-    fn report(&mut self, tick: u64, t: f64, d: &Decision, prev_refused: bool, mut recorder: Option<&mut Recorder>) {
+    /// The gate's rare events of this tick, in the order they are recorded.
+    fn gate_events(&self, tick: u64, t: f64, d: &Decision, prev_refused: bool, events: &mut TickEvents) {
         let e = d.events;
-        // A flapping controller starts a streak every few ticks: record each, log one per second.
-        let ticks_per_s = 1_000_000_000 / self.period_ns.max(1);
-        let may_log = self.last_log_tick.is_none_or(|l| tick >= l + ticks_per_s);
-        if may_log && (e.miss_streak_started || (d.refused.is_some() && !prev_refused)) {
-            self.last_log_tick = Some(tick);
-        }
-        if let Some(r) = d.refused {
-            // Log and record the first refusal of a streak only (a bad controller refuses every tick).
-            if !prev_refused {
-                let mut s = StackText::new();
-                let _ = write!(s, "tick {tick}: {r}");
-                let kind =
-                    if matches!(r, crate::gate::Refusal::Version(_)) { EventKind::VersionMismatch } else { EventKind::TorqueRefused };
-                if may_log {
-                    tracing::warn!("{}", s.as_str());
-                }
-                event(recorder.as_deref_mut(), tick, t, kind, s.as_str());
-            }
+        if let Some(r) = d.refused.filter(|_| !prev_refused) {
+            events.push(tick, t, PlantEvent::Refused(r));
         }
         if e.miss_streak_started {
-            let mut s = StackText::new();
-            let _ = write!(s, "tick {tick}: no valid torque in time, holding the last one");
-            if may_log {
-                tracing::warn!("{} (total misses {})", s.as_str(), self.gate.total_misses());
-            }
-            event(recorder.as_deref_mut(), tick, t, EventKind::Miss, s.as_str());
+            events.push(tick, t, PlantEvent::MissStreak { total_misses: self.gate.total_misses() });
         }
         if e.safe_stop_entered {
-            let mut s = StackText::new();
-            if e.controller_fault {
-                let _ = write!(s, "tick {tick}: safe stop requested by the controller (fault)");
+            let cause = if e.controller_fault {
+                SafeStopCause::ControllerFault
             } else {
-                let _ = write!(
-                    s,
-                    "tick {tick}: safe stop after {} consecutive misses (gravity compensation + joint damping)",
-                    self.gate.consecutive_misses()
-                );
-            }
-            tracing::error!("{}", s.as_str());
-            event(recorder.as_deref_mut(), tick, t, EventKind::SafeStop, s.as_str());
+                SafeStopCause::Misses(self.gate.consecutive_misses())
+            };
+            events.push(tick, t, PlantEvent::SafeStop(cause));
         }
         if e.safe_stop_cleared {
-            let mut s = StackText::new();
-            let _ = write!(s, "tick {tick}: safe stop cleared, controller resumes (blended in)");
-            tracing::info!("{}", s.as_str());
-            event(recorder.as_deref_mut(), tick, t, EventKind::SafeStopCleared, s.as_str());
+            events.push(tick, t, PlantEvent::SafeStopCleared);
         }
         if let Some((old, new)) = e.controller_change {
-            let mut s = StackText::new();
-            match old {
-                Some(old) => {
-                    let _ = write!(s, "tick {tick}: controller {new:#x} takes over from {old:#x} (blended in)");
-                }
-                None => {
-                    let _ = write!(s, "tick {tick}: controller {new:#x} connected");
-                }
-            }
-            tracing::info!("{}", s.as_str());
-            event(recorder, tick, t, EventKind::ControllerChange, s.as_str());
+            events.push(tick, t, PlantEvent::ControllerChange { old, new });
         }
     }
 
     /// After integrating: the cell's sensor and encoders read the new state, which is tick
-    /// `tick`'s; a sensor entering or leaving saturation is an `/events` entry.
-    fn read_sensors(&mut self, tick: u64, t: f64, recorder: Option<&mut Recorder>) {
+    /// `tick`'s; a sensor entering or leaving saturation is an event.
+    fn read_sensors(&mut self, tick: u64, t: f64, events: &mut TickEvents) {
         if let Some(e) = self.encoders.as_mut() {
             e.update(&self.physics.q(), &self.physics.qd());
         }
@@ -356,45 +329,28 @@ impl PlantTick {
         let was = sensor.saturated;
         sensor.read(&self.physics);
         if sensor.saturated != was {
-            let mut s = StackText::new();
-            if sensor.saturated {
-                let r = sensor.reading;
-                let _ = write!(
-                    s,
-                    "tick {tick}: force/torque sensor saturated: reads ({:.3}, {:.3}, {:.3}) N, ({:.4}, {:.4}, {:.4}) N m at its range",
-                    r[0], r[1], r[2], r[3], r[4], r[5]
-                );
-                tracing::warn!("{}", s.as_str());
-            } else {
-                let _ = write!(s, "tick {tick}: force/torque sensor back within its range");
-            }
-            event(recorder, tick, t, EventKind::Info, s.as_str());
+            let event =
+                if sensor.saturated { PlantEvent::SensorSaturated { reading: sensor.reading } } else { PlantEvent::SensorWithinRange };
+            events.push(tick, t, event);
         }
     }
 
     /// After integrating: reflexes (safe stop at once) and end-stop entries of the new state,
     /// which is tick `tick`'s.
-    fn check_limits(&mut self, tick: u64, t: f64, mut recorder: Option<&mut Recorder>) {
+    fn check_limits(&mut self, tick: u64, t: f64, events: &mut TickEvents) {
         let reflex = self.reflex_limits.check(&self.physics.qd(), self.physics.tcp_speed_mps(), self.physics.contact_force_n());
         if let Some(r) = reflex {
             if !self.gate.reflex_latched() {
                 self.gate.reflex();
                 self.first.reflex.get_or_insert(tick);
                 self.first.safe_stop.get_or_insert(tick);
-                let mut s = StackText::new();
-                let _ = write!(s, "tick {tick}: {r}: safe stop until the controller acknowledges");
-                tracing::error!("{}", s.as_str());
-                event(recorder.as_deref_mut(), tick, t, EventKind::Reflex, s.as_str());
+                events.push(tick, t, PlantEvent::Reflex(r));
             }
         }
         let stop = self.physics.limits().joint_in_end_stop(&self.physics.q());
         if let (Some(j), None) = (stop, self.in_end_stop) {
-            let [lo, hi] = self.physics.limits().range_rad[j];
-            let mut s = StackText::new();
-            let _ =
-                write!(s, "tick {tick}: joint {} in its end stop at {:.4} rad (range {lo:.4} .. {hi:.4} rad)", j + 1, self.physics.q()[j]);
-            tracing::warn!("{}", s.as_str());
-            event(recorder, tick, t, EventKind::EndStop, s.as_str());
+            let range_rad = self.physics.limits().range_rad[j];
+            events.push(tick, t, PlantEvent::EndStop { joint: j, q_rad: self.physics.q()[j], range_rad });
         }
         self.in_end_stop = stop;
     }
@@ -422,10 +378,3 @@ pub fn tick_record(
 }
 
 const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics::zeroed(0);
-
-/// Record a rare event, if there is a recorder.
-pub(crate) fn event(recorder: Option<&mut Recorder>, tick: u64, t: f64, kind: EventKind, text: &str) {
-    if let Some(r) = recorder {
-        r.record_event(&EventRecord::new(tick, t, kind, text));
-    }
-}

@@ -4,10 +4,9 @@
 //! `cargo build --release --workspace --bins`; needs `pip install abb-robot-client` (the tests
 //! fail without it; `.ci/deps` installs it).
 
-use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use harness::*;
 use recording_tools::read::Recording;
@@ -19,24 +18,6 @@ static SERIAL: Mutex<()> = Mutex::new(());
 
 fn client_script() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("python/egm_client.py")
-}
-
-/// A UDP port free right now (the sensor binds it next).
-fn free_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
-/// Wait until someone holds UDP `port` on loopback (the Python client has bound it).
-fn wait_bound(port: u16, client: &mut Daemon) {
-    let end = Instant::now() + Duration::from_secs(30);
-    while UdpSocket::bind(("127.0.0.1", port)).is_ok() {
-        assert!(
-            Instant::now() < end && client.wait_timeout(Duration::from_millis(0)).is_none(),
-            "the EGM client never bound port {port}: {}",
-            client.stderr()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 struct EgmRun {
@@ -226,15 +207,6 @@ fn a_reference_faster_than_the_axis_is_refused_with_an_event_and_the_arm_stays()
     let Some(log) = refused_once_and_the_arm_stays("egm_too_fast", "egm-fast", "too_fast", expected) else { return };
     // The client went back to holding after the refused step, and those messages were taken.
     assert!(log.len() > 60, "{} cycles", log.len());
-}
-
-/// `scenarios/egm.toml` with the sensor on `port`, written into `dir`.
-fn egm_scenario_on(dir: &Path, port: u16) -> PathBuf {
-    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/egm.toml")).unwrap();
-    assert!(text.contains("sensor_address = \"127.0.0.1:6510\""));
-    let p = dir.join("egm.toml");
-    std::fs::write(&p, text.replace("127.0.0.1:6510", &format!("127.0.0.1:{port}"))).unwrap();
-    p
 }
 
 /// The thesis run over EGM in lockstep: `egm-controller` bound first, then the plant.

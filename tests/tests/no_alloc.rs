@@ -88,7 +88,7 @@ fn servo_run_allocates_nothing(name: &str, ticks: Option<u64>) {
         let a1 = allocations();
         let (torque, diag) = controller.process(&state, &wrench);
         let a2 = allocations();
-        let outcome = plant.advance(Some(&torque), None);
+        let outcome = plant.advance(Some(&torque));
         let a3 = allocations();
         std::hint::black_box((&diag, &outcome));
         if state.tick >= WARM_UP_TICKS {
@@ -122,12 +122,15 @@ fn handing_every_tick_to_the_recorder_does_not_allocate() {
     let mut plant = PlantTick::new(&s, physics, Mode::Lockstep);
     let mut controller = Controller::from_scenario(&s).with_id(1);
     let n_ticks = 2500;
+    let mut hand_on = plant_sim::tick_events::EventHandOn::new(plant.period_ns());
     let (mut allocated, mut counted) = (0, 0);
     while plant.tick() < n_ticks {
         let a0 = allocations();
         let (state, wrench) = plant.outputs();
         let (torque, diag) = controller.process(&state, &wrench);
-        let outcome = plant.advance(Some(&torque), Some(&mut recorder));
+        plant_sim::loop_lockstep::make_room_for_tick(Some(&mut recorder));
+        let outcome = plant.advance(Some(&torque));
+        hand_on.hand_on(&outcome.events, Some(&mut recorder));
         let timing = TimingRecord { missed: outcome.decision.missed, ..TimingRecord::default() };
         recorder.record_tick_commanded(&plant_sim::tick::tick_record(state, wrench, &outcome, Some(diag), timing), Some(&torque));
         if state.tick >= WARM_UP_TICKS {
@@ -139,4 +142,39 @@ fn handing_every_tick_to_the_recorder_does_not_allocate() {
     recorder.finish().unwrap();
     assert_eq!(dropped, 0, "the writer kept up, so every tick went through the queue");
     assert_eq!(allocated, 0, "{allocated} heap allocations in the tick plus recorder hand-off over {counted} ticks");
+}
+
+/// The EGM driver's run (`[egm] enabled`, lockstep) against the real `egm-controller` over UDP:
+/// the plant's tick core, the servo, the `EgmRobot` encoding and the sensor messages' decoding.
+/// Its allocations do not grow with the run's length: a run of 2400 ticks makes exactly as many
+/// as one of 400 (the set-up's), so the ticks between make none. Build first:
+/// `cargo build --release --workspace --bins`.
+#[test]
+fn the_egm_driver_does_not_allocate_per_tick() {
+    let counts: Vec<(u64, usize)> = [400u64, 2400].iter().map(|&n| (n, egm_run_allocations(n))).collect();
+    eprintln!("EGM driver allocations (ticks, allocations): {counts:?}");
+    assert_eq!(counts[0].1, counts[1].1, "the EGM driver allocated per tick: {counts:?}");
+}
+
+/// Allocations of this thread over one lockstep EGM run of `n_ticks` (set-up included).
+fn egm_run_allocations(n_ticks: u64) -> usize {
+    use harness::{bin, egm_scenario_on, free_port, temp_dir, unique_rig, wait_bound, Daemon};
+    let dir = temp_dir(&unique_rig("no-alloc-egm"));
+    let port = free_port();
+    let sc = egm_scenario_on(&dir, port);
+    let s = Scenario::load(&sc).unwrap();
+    let mut sensor = Daemon::start("egm-controller", &bin("egm-controller"), &["--scenario", sc.to_str().unwrap()], &dir);
+    wait_bound(port, &mut sensor);
+    let mut plant = PlantTick::from_scenario(&s, &strip::cache::cache_dir(), Mode::Lockstep).unwrap();
+    let params = plant_sim::egm::EgmParams::from_scenario(&s, Mode::Lockstep, n_ticks).unwrap();
+    let a0 = allocations();
+    let mut egm = plant_sim::egm::EgmLoop::new(&s, &mut plant, None, params, plant_sim::signals::Signals::detached()).unwrap();
+    let (stats, es) = egm.run();
+    let allocated = allocations() - a0;
+    drop(egm);
+    assert!(sensor.expect_exit(std::time::Duration::from_secs(10)).success(), "egm-controller: {}", sensor.stderr());
+    assert_eq!(stats.ticks, n_ticks, "{stats:?}");
+    assert!(es.accepted * 8 >= n_ticks / 4 * 7 && es.refused == 0, "the sensor answered every cycle: {es:?}");
+    assert_eq!(plant.tick(), n_ticks);
+    allocated
 }

@@ -329,8 +329,11 @@ fn a_stranger_on_the_torque_service_moves_nothing_and_is_recorded_once() {
     eprintln!("stranger published {sent} torques; the plant ignored {} foreign answers", summary["foreign_answers"]);
     c.check(sent > 500, || format!("the stranger published only {sent} torques: {}", stranger.stderr()));
     // The plant sees a stranger's answer only when it comes in before the active controller's
-    // (then the tick is settled): a share of them (479-962 of about 1650 measured).
-    c.check(summary["foreign_answers"].as_u64().unwrap_or(0) > 50, || format!("foreign answers ignored: {}", summary["foreign_answers"]));
+    // (then the tick is settled): a share of them that depends on scheduling (34-962 of about
+    // 1650 seen). One applied would put 40 N m on joint 1 for a tick, which the checks below see;
+    // so what matters is that the stranger was seen at all, and never more often than it sent.
+    let foreign_answers = summary["foreign_answers"].as_u64().unwrap_or(0);
+    c.check(foreign_answers > 0 && foreign_answers <= sent, || format!("foreign answers ignored: {foreign_answers} of {sent} sent"));
     let foreign = events(&rec, EventKind::ForeignTorque);
     eprintln!("foreign torque events: {foreign:?}");
     c.check(foreign.len() == 1, || format!("one foreign_torque event: {foreign:?}"));

@@ -86,10 +86,10 @@ pub fn run(cmd: StudyCmd, stamp: impl FnOnce() -> String) -> anyhow::Result<i32>
                 );
                 return Ok(5);
             }
-            plant_sim::rt::install_stop_signals();
+            let signals = plant_sim::signals::Signals::install_stop_only();
             let keep = a.recordings.unwrap_or(study.recordings);
-            super::run_cases(&study, &dir, &missing, keep)?;
-            if plant_sim::rt::stop_requested() {
+            super::run_cases(&study, &dir, &missing, keep, signals)?;
+            if signals.stop_requested() {
                 eprintln!(
                     "rig study: interrupted; finished cases are kept: `rig study run {} --out {} --resume` runs the rest",
                     a.file.display(),
@@ -102,7 +102,7 @@ pub fn run(cmd: StudyCmd, stamp: impl FnOnce() -> String) -> anyhow::Result<i32>
         StudyCmd::Case(a) => {
             let study = super::load_from_dir(&a.dir)?;
             let keep = study.recordings;
-            plant_sim::rt::install_stop_signals();
+            let signals = plant_sim::signals::Signals::install_stop_only();
             if let Some(t) = a.task {
                 let plan =
                     slurm::read_plan(&a.dir).ok_or_else(|| anyhow::anyhow!("{} has no Slurm plan (slurm/slurm.json)", a.dir.display()))?;
@@ -110,8 +110,8 @@ pub fn run(cmd: StudyCmd, stamp: impl FnOnce() -> String) -> anyhow::Result<i32>
                 let sdir = a.dir.join("slurm");
                 super::write_atomic(&sdir.join(format!("task-{t}.started")), b"")?;
                 let cases: Vec<usize> = slurm::task_cases(&plan, study.cases, t).collect();
-                let ran = super::run_cases(&study, &a.dir, &cases, keep)?;
-                if plant_sim::rt::stop_requested() {
+                let ran = super::run_cases(&study, &a.dir, &cases, keep, signals)?;
+                if signals.stop_requested() {
                     return Ok(143);
                 }
                 super::write_atomic(&sdir.join(format!("task-{t}.done")), format!("{ran}\n").as_bytes())?;
@@ -131,7 +131,7 @@ pub fn run(cmd: StudyCmd, stamp: impl FnOnce() -> String) -> anyhow::Result<i32>
             let strips = crate::sweep::SharedStrips::new(&strip::cache::cache_dir());
             let point = &study.points()[n];
             let scenario = super::case_dir(&a.dir, n).join("scenario.toml");
-            let Some(r) = super::run_case(&study, (&scenario, &recording), n, point, Keep::All, &strips)? else { return Ok(130) };
+            let Some(r) = super::run_case(&study, (&scenario, &recording), n, point, Keep::All, &strips, signals)? else { return Ok(130) };
             println!("rig study: case {n} run again from {}; recording {}", scenario.display(), recording.display());
             println!("{}", serde_json::to_string_pretty(&r)?);
             match stored {

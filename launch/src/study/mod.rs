@@ -147,10 +147,11 @@ pub fn run_case(
     point: &[f64],
     keep: Keep,
     strips: &crate::sweep::SharedStrips,
+    signals: plant_sim::signals::Signals,
 ) -> anyhow::Result<Option<CaseRecord>> {
     use crate::supervise::{Ending, Outcome};
     let tuning = recordings::RecorderTuning { compression_level: crate::in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
-    let summary = crate::in_process::run(&format!("study-case-{n}"), scenario, None, recording, tuning, |s| strips.physics(s));
+    let summary = crate::in_process::run(&format!("study-case-{n}"), scenario, None, recording, tuning, |s| strips.physics(s), signals);
     let (ending, summary) = match summary {
         Ok(v) if v["stopped_by_signal"].as_bool() == Some(true) => return Ok(None),
         Ok(v) => (Ending::Completed, Some(v)),
@@ -192,20 +193,21 @@ pub fn run_case(
 }
 
 /// Runs the given cases (skipping finished ones) on one thread per core, each result written
-/// atomically as it ends; a progress line on a terminal. Returns how many ran.
-pub fn run_cases(study: &Study, dir: &Path, cases: &[usize], keep: Keep) -> anyhow::Result<usize> {
+/// atomically as it ends; a progress line on a terminal; a stop (`signals`) lets the running
+/// cases end and starts no more. Returns how many ran.
+pub fn run_cases(study: &Study, dir: &Path, cases: &[usize], keep: Keep, signals: plant_sim::signals::Signals) -> anyhow::Result<usize> {
     let todo: Vec<usize> = cases.iter().copied().filter(|&n| !case_dir(dir, n).join("result.json").exists()).collect();
     let strips = crate::sweep::SharedStrips::new(&strip::cache::cache_dir());
     let points = study.points();
     let progress = Progress::new(todo.len(), cases.len() - todo.len());
     let errors = std::sync::Mutex::new(Vec::new());
     crate::sweep::run_cases(&todo, |_, &n| {
-        if plant_sim::rt::stop_requested() {
+        if signals.stop_requested() {
             return;
         }
         let cdir = case_dir(dir, n);
         let files = (cdir.join("scenario.toml"), cdir.join("run.mcap"));
-        match run_case(study, (&files.0, &files.1), n, &points[n], keep, &strips).and_then(|r| match r {
+        match run_case(study, (&files.0, &files.1), n, &points[n], keep, &strips, signals).and_then(|r| match r {
             Some(r) => write_atomic(&case_dir(dir, n).join("result.json"), serde_json::to_string_pretty(&r)?.as_bytes()),
             None => Ok(()),
         }) {

@@ -7,8 +7,9 @@
 //! frame (mm, quaternion u0 = scalar), motor, EGM (MCI) and RAPID state, and the wheel's measured
 //! force (sensor frame at the TCP, N and N m, as `/wrench`). The sensor answers with `EgmSensor`
 //! joint (and optional speed) references, checked by [`session::Rules`] and tracked by the
-//! emulated motion controller [`servo::Servo`], whose torques the plant integrates each 1 ms
-//! tick exactly as on the torque path.
+//! emulated motion controller [`servo::Servo`], whose torques the plant's one tick core
+//! ([`PlantTick::advance_servo`]) integrates each 1 ms tick exactly as on the torque path: the
+//! same physics, sensor chain, encoders, reflexes and end stops, and the same pacing ([`Pacer`]).
 //!
 //! Session (as on the robot):
 //! - *waiting*: until the first valid sensor message the robot holds its start pose. Real time:
@@ -36,16 +37,18 @@ use std::os::fd::AsRawFd;
 use std::time::Duration;
 
 use egm::pb;
-use messages::{JointState, JointTorque, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
+use messages::PlantStatus;
 use robot::{Robot, Vec6};
 use scenarios::{Mode, Scenario};
 
-use crate::limits::ReflexLimits;
-use crate::physics::Physics;
-use crate::recording::{EgmRecord, EventKind, EventRecord, Recorder, StripRecord, TickRecord, TimingRecord};
+use crate::pacer::Pacer;
+use crate::recording::{EgmRecord, EventKind, EventRecord, Recorder, TimingRecord};
 use crate::rt;
 use crate::stack_text::StackText;
+use crate::signals::Signals;
 use crate::stats::LoopStats;
+use crate::tick::PlantTick;
+use crate::tick_events::{EventHandOn, PlantEvent};
 use servo::{Servo, ServoParams};
 use session::{Refusal, Rules, SensorBuffer};
 
@@ -97,12 +100,14 @@ pub fn servo_model(s: &Scenario) -> Robot {
 
 /// The EGM robot controller and its plant.
 pub struct EgmLoop<'a> {
-    pub physics: &'a mut Physics,
+    /// The plant's tick core, driven by the servo's torques.
+    pub plant: &'a mut PlantTick,
     pub recorder: Option<&'a mut Recorder>,
     pub params: EgmParams,
-    pub reflex_limits: ReflexLimits,
     pub servo: Servo,
     sock: UdpSocket,
+    /// Stop requests (SIGINT/SIGTERM).
+    signals: Signals,
     rules: Rules,
     sensor_buf: SensorBuffer,
     robot_msg: pb::EgmRobot,
@@ -143,14 +148,15 @@ impl<'a> EgmLoop<'a> {
     /// servo at the plant's start pose.
     pub fn new(
         s: &Scenario,
-        physics: &'a mut Physics,
+        plant: &'a mut PlantTick,
         recorder: Option<&'a mut Recorder>,
         params: EgmParams,
+        signals: Signals,
     ) -> anyhow::Result<EgmLoop<'a>> {
         let bind: SocketAddr = if params.sensor.is_ipv4() { "0.0.0.0:0".parse()? } else { "[::]:0".parse()? };
         let sock = UdpSocket::bind(bind).map_err(|e| anyhow::anyhow!("binding the EGM robot's UDP socket: {e}"))?;
         sock.set_nonblocking(true)?;
-        let q0 = physics.q();
+        let q0 = plant.physics().q();
         let servo = Servo::new(ServoParams::from_scenario(s), servo_model(s), q0);
         let robot_msg = pb::EgmRobot {
             header: Some(pb::EgmHeader::default()),
@@ -172,12 +178,12 @@ impl<'a> EgmLoop<'a> {
         };
         Ok(EgmLoop {
             rules: Rules::new(s.egm.cycle_s, q0),
-            reflex_limits: ReflexLimits::from_scenario(s),
-            physics,
+            plant,
             recorder,
             params,
             servo,
             sock,
+            signals,
             sensor_buf: SensorBuffer::default(),
             robot_msg,
             out: Vec::with_capacity(2048),
@@ -199,16 +205,18 @@ impl<'a> EgmLoop<'a> {
         }
     }
 
-    /// Encode and send this tick's `EgmRobot`.
+    /// Encode and send this tick's `EgmRobot`: the state as the plant reports it (the encoders'
+    /// joints, the force/torque sensor's wrench when the scenario models them).
     fn send_robot(&mut self, tick: u64) {
-        let q = self.physics.q();
+        let (state, wrench) = self.plant.outputs();
+        let q = Vec6::from(state.q);
         let q_r = self.servo.servo_reference();
-        let robot = self.physics.robot();
+        let robot = self.plant.physics().robot();
         let sim_ns = tick * self.params.period_ns;
         let wall_ns = self.start_wall_ns + sim_ns;
         let fb_pose = robot.tcp_pose(&q);
         let planned_pose = robot.tcp_pose(&q_r);
-        let (force, torque) = self.physics.wrench_on_tool();
+        let (force, torque) = (wrench.force, wrench.torque);
         let q_deg = egm::axes::abb_deg_from_dh(&q.into());
         let r_deg = egm::axes::abb_deg_from_dh(&q_r.into());
         let m = &mut self.robot_msg;
@@ -252,7 +260,7 @@ impl<'a> EgmLoop<'a> {
         let end = std::time::Instant::now() + timeout;
         loop {
             let now = std::time::Instant::now();
-            if now >= end || rt::stop_requested() {
+            if now >= end || self.signals.stop_requested() {
                 return false;
             }
             let slice = (end - now).min(Duration::from_millis(1));
@@ -291,28 +299,22 @@ impl EgmLoop<'_> {
         let mut stats = LoopStats::empty();
         let mut es = EgmStats::default();
         let mut buf = [0u8; 2048];
-        let mut strip = StripRecord::default();
+        let mut hand_on = EventHandOn::new(p.period_ns);
         let origin_ns = rt::now_mono_ns();
-        let mut deadline_ns = origin_ns;
+        let mut pacer = Pacer::new(origin_ns, p.period_ns);
         let mut last_valid_ns = origin_ns;
         let mut refusing = false;
         let mut first_answer: Option<(u64, u64)> = None;
-        let mut tick: u64 = 0;
-        let mut last_tau = Vec6::zeros();
+        let mut tick: u64 = self.plant.tick();
         let mut last_sent_ns = origin_ns;
         let mut cycle = EgmRecord { servo_lag_s: self.servo.params().lag_s(), ..EgmRecord::default() };
         while tick < p.n_ticks {
-            if rt::stop_requested() {
+            if self.signals.stop_requested() {
                 stats.stopped_by_signal = true;
                 break;
             }
             if p.mode == Mode::Realtime {
-                let now = rt::now_mono_ns();
-                if now > deadline_ns + p.period_ns {
-                    stats.overruns += (now - deadline_ns) / p.period_ns;
-                    deadline_ns = now;
-                }
-                rt::sleep_until_mono_ns(deadline_ns);
+                pacer.pace(tick, &mut stats, self.recorder.as_deref_mut());
             }
             let wake_ns = rt::now_mono_ns();
             let publish_wall_ns = rt::now_wall_ns();
@@ -326,18 +328,18 @@ impl EgmLoop<'_> {
                 last_sent_ns = rt::now_mono_ns();
                 if p.mode == Mode::Lockstep {
                     if self.state == SessionState::Waiting {
-                        while !rt::stop_requested() && !self.wait_readable(LOCKSTEP_RESEND) {
-                            if rt::stop_requested() {
+                        while !self.signals.stop_requested() && !self.wait_readable(LOCKSTEP_RESEND) {
+                            if self.signals.stop_requested() {
                                 break;
                             }
                             self.robot_seqno = self.robot_seqno.wrapping_sub(1);
                             self.send_robot(tick);
                         }
-                    } else if !self.wait_readable(Duration::from_nanos(p.comm_timeout_ns)) && !rt::stop_requested() {
+                    } else if !self.wait_readable(Duration::from_nanos(p.comm_timeout_ns)) && !self.signals.stop_requested() {
                         // Nothing in comm_timeout: the session ends below.
                         last_valid_ns = 0;
                     }
-                    if rt::stop_requested() {
+                    if self.signals.stop_requested() {
                         stats.stopped_by_signal = true;
                         break;
                     }
@@ -419,74 +421,54 @@ impl EgmLoop<'_> {
                 );
                 self.end_session(tick, s.as_str(), &mut stats, &mut es);
             }
-            // 4. The servo's torque over this tick, integrated.
-            let (q, qd) = (self.physics.q(), self.physics.qd());
-            let tau = self.servo.tick(&q, &qd);
+            // 4. The servo's torque over this tick, from the joints the state reports, integrated
+            //    by the plant's tick core.
+            let (mut state, wrench) = self.plant.outputs();
+            state.plant_status = match self.state {
+                SessionState::Waiting => PlantStatus::WaitingForController,
+                SessionState::Running => PlantStatus::Running,
+                SessionState::Stopped => PlantStatus::SafeStop,
+            } as u32;
+            let tau = self.servo.tick(&Vec6::from(state.q), &Vec6::from(state.qd));
             let tau = Vec6::from_fn(|i, _| tau[i].clamp(-Robot::TORQUE_LIMIT_NM[i], Robot::TORQUE_LIMIT_NM[i]));
-            let state = JointState {
-                contract_version: CONTRACT_VERSION,
-                plant_status: match self.state {
-                    SessionState::Waiting => PlantStatus::WaitingForController,
-                    SessionState::Running => PlantStatus::Running,
-                    SessionState::Stopped => PlantStatus::SafeStop,
-                } as u32,
-                tick,
-                sim_time_s: tick as f64 * p.period_ns as f64 * 1e-9,
-                q: q.into(),
-                qd: qd.into(),
-                tau_applied: last_tau.into(),
-                period_s: p.period_ns as f64 * 1e-9,
-                flags: if p.mode == Mode::Lockstep { messages::state_flags::LOCKSTEP } else { 0 }
-                    | if self.physics.in_contact() { messages::state_flags::IN_CONTACT } else { 0 },
-                consecutive_misses: 0,
-                total_misses: 0,
-            };
-            let (force, torque) = self.physics.wrench_on_tool();
-            let wrench = Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::SensorAtTcp as u32, tick, force, torque };
             let pre_ns = rt::now_mono_ns() - wake_ns;
             let t0 = rt::now_mono_ns();
-            self.physics.step_tick(&tau);
-            last_tau = tau;
-            // 5. Reflexes end the session (the robot's motion supervision stops it).
-            let reflex = self.reflex_limits.check(&self.physics.qd(), self.physics.tcp_speed_mps(), self.physics.contact_force_n());
-            if let (Some(r), true) = (reflex, self.state != SessionState::Stopped) {
-                stats.reflexes += 1;
-                stats.first_reflex_tick.get_or_insert(tick + 1);
-                let mut s = StackText::new();
-                let _ = write!(s, "tick {}: {r}: EGM session ended, the robot holds", tick + 1);
-                tracing::error!("{}", s.as_str());
-                self.event(tick + 1, EventKind::Reflex, s.as_str());
-                self.end_session(tick + 1, "", &mut stats, &mut es);
+            let outcome = self.plant.advance_servo(&tau);
+            // 5. The tick's events; a reflex ends the session (the robot's motion supervision
+            //    stops it).
+            for r in outcome.events.iter() {
+                match r.event {
+                    PlantEvent::Reflex(x) if self.state != SessionState::Stopped => {
+                        stats.reflexes += 1;
+                        stats.first_reflex_tick.get_or_insert(r.tick);
+                        let mut s = StackText::new();
+                        let _ = write!(s, "tick {}: {x}: EGM session ended, the robot holds", r.tick);
+                        tracing::error!("{}", s.as_str());
+                        self.event(r.tick, EventKind::Reflex, s.as_str());
+                        self.end_session(r.tick, "", &mut stats, &mut es);
+                    }
+                    _ => hand_on.one(r, self.recorder.as_deref_mut()),
+                }
             }
             // 6. Record.
-            self.physics.fill_strip_record(&mut strip);
             let plant_ns = pre_ns + (rt::now_mono_ns() - t0);
             stats.plant_compute.record(plant_ns);
-            let rec = TickRecord {
-                state,
-                wrench,
-                torque: JointTorque { contract_version: CONTRACT_VERSION, controller_status: 0, tick, controller_id: 0, tau: tau.into() },
-                torque_held: false,
-                diag: messages::ControllerDiagnostics::zeroed(0),
-                has_diag: false,
-                strip,
-                timing: TimingRecord {
-                    publish_wall_ns,
-                    torque_receive_wall_ns: if answered { rt::now_wall_ns() } else { 0 },
-                    round_trip_ns: if answered { latency_ns } else { 0 },
-                    period_ns: p.period_ns,
-                    missed: false,
-                    plant_compute_ns: plant_ns,
-                    controller_compute_ns: 0,
-                    // The stage stamps are the torque path's (`rig timing`); EGM cycles are in /egm.
-                    stages: None,
-                },
+            let timing = TimingRecord {
+                publish_wall_ns,
+                torque_receive_wall_ns: if answered { rt::now_wall_ns() } else { 0 },
+                round_trip_ns: if answered { latency_ns } else { 0 },
+                period_ns: p.period_ns,
+                missed: false,
+                plant_compute_ns: plant_ns,
+                controller_compute_ns: 0,
+                // The stage stamps are the torque path's (`rig timing`); EGM cycles are in /egm.
+                stages: None,
             };
             if let Some(r) = self.recorder.as_deref_mut() {
-                r.record_tick(&rec);
+                r.record_tick(&crate::tick::tick_record(state, wrench, &outcome, None, timing));
             }
             tick += 1;
-            deadline_ns += p.period_ns;
+            pacer.next();
         }
         // The end of the run ends the session too: a last EgmRobot says MCI_STOPPED, so a sensor
         // can end at once.
@@ -497,7 +479,7 @@ impl EgmLoop<'_> {
         stats.ticks = tick;
         stats.refusals = es.refused;
         stats.wall_s = (rt::now_mono_ns() - origin_ns) as f64 * 1e-9;
-        stats.sim_s = self.physics.time_s();
+        stats.sim_s = self.plant.physics().time_s();
         if let Some((t0, k0)) = first_answer {
             stats.active_wall_s = (rt::now_mono_ns() - t0) as f64 * 1e-9;
             stats.active_sim_s = (tick - k0) as f64 * p.period_ns as f64 * 1e-9;
