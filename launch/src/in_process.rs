@@ -69,7 +69,7 @@ pub fn run(
         }
         let (state, wrench) = plant.outputs();
         let (torque, diag) = controller.process(&state, &wrench);
-        plant_sim::loop_lockstep::make_room_for_tick(recorder.as_mut());
+        plant_sim::tick_events::make_room_for_tick(recorder.as_mut());
         let outcome = plant.advance(Some(&torque));
         hand_on.hand_on(&outcome.events, recorder.as_mut());
         if let Some(r) = recorder.as_mut() {

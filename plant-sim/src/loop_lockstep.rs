@@ -16,28 +16,12 @@ use std::time::{Duration, Instant};
 use messages::PlantStatus;
 
 use crate::loop_rt::{PlantLoop, Wait};
-use crate::recording::{EventKind, Recorder};
+use crate::recording::EventKind;
 use crate::rt;
 use crate::stats::LoopStats;
 
 /// How long a lockstep plant republishes the waiting state while no controller has answered yet.
 const LOCKSTEP_REPUBLISH: Duration = Duration::from_millis(5);
-
-/// Queue slots a lockstep tick waits for before it advances: its tick record and the events one
-/// tick can raise ([`crate::tick_events::TICK_EVENTS_MAX`] and the driver's own) with room to spare.
-const LOCKSTEP_RECORD_SLOTS: usize = 16;
-/// The longest a lockstep tick waits for the writer; after that the record is a counted drop
-/// (a writer that no longer drains its queue must not hang the run).
-const LOCKSTEP_RECORD_WAIT: Duration = Duration::from_secs(2);
-
-/// Lockstep has no deadline: before a tick advances, wait for the writer (on a loaded host it
-/// falls behind a plant running 30x real time) instead of dropping the tick's record and events.
-/// Every lockstep driver (daemons and in process) calls it; real time never waits.
-pub fn make_room_for_tick(recorder: Option<&mut Recorder>) {
-    if let Some(r) = recorder {
-        r.wait_for_room(LOCKSTEP_RECORD_SLOTS, LOCKSTEP_RECORD_WAIT);
-    }
-}
 
 impl PlantLoop<'_> {
     /// The lockstep loop: run until `n_ticks` ticks are integrated or a stop signal arrives.

@@ -23,13 +23,13 @@ use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench};
 use scenarios::Mode;
 
 use crate::arbiter::{Arbiter, ArbiterEvents, TakeoverReason};
+use crate::pacer::Pacer;
 use crate::recording::{ControllerStamps, EventKind, EventRecord, Recorder, StageStamps, TimingRecord};
 use crate::rt;
+use crate::signals::{ControllerEnd, Signals};
 use crate::stack_text::StackText;
 use crate::stats::LoopStats;
 use crate::tick::{PlantTick, TickOutcome};
-use crate::pacer::Pacer;
-use crate::signals::{ControllerEnd, Signals};
 use crate::tick_events::EventHandOn;
 
 /// Loop parameters.
@@ -349,7 +349,7 @@ impl PlantLoop<'_> {
             return None;
         }
         if self.plant.is_lockstep() {
-            crate::loop_lockstep::make_room_for_tick(self.recorder.as_deref_mut());
+            crate::tick_events::make_room_for_tick(self.recorder.as_deref_mut());
         }
         let outcome = self.plant.advance(torque.as_ref());
         run.hand_on.hand_on(&outcome.events, self.recorder.as_deref_mut());

@@ -304,11 +304,8 @@ impl PlantTick {
             events.push(tick, t, PlantEvent::MissStreak { total_misses: self.gate.total_misses() });
         }
         if e.safe_stop_entered {
-            let cause = if e.controller_fault {
-                SafeStopCause::ControllerFault
-            } else {
-                SafeStopCause::Misses(self.gate.consecutive_misses())
-            };
+            let cause =
+                if e.controller_fault { SafeStopCause::ControllerFault } else { SafeStopCause::Misses(self.gate.consecutive_misses()) };
             events.push(tick, t, PlantEvent::SafeStop(cause));
         }
         if e.safe_stop_cleared {
@@ -378,3 +375,306 @@ pub fn tick_record(
 }
 
 const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics::zeroed(0);
+
+#[cfg(test)]
+mod tests {
+    //! Each gate decision, the reflexes and the stall (misses) of the plant's one core, against
+    //! hand-computed ticks: the blend's straight line (`from + (τ − from) k / N`), the safe
+    //! stop's `g(q) − D q̇`, and a twin [`Physics`] stepped with what the tick says it applied.
+    use super::*;
+    use messages::ControllerStatus;
+    use std::path::Path;
+
+    /// The bare arm (no strip: fast, and the start pose is free of contact).
+    fn scenario() -> Scenario {
+        let mut s = Scenario::default();
+        s.strip.enabled = false;
+        s
+    }
+
+    fn plant(s: &Scenario) -> PlantTick {
+        PlantTick::new(s, Physics::new(s, Path::new("/nonexistent")).unwrap(), Mode::Lockstep)
+    }
+
+    fn twin(s: &Scenario) -> Physics {
+        Physics::new(s, Path::new("/nonexistent")).unwrap()
+    }
+
+    /// Controller `id`'s answer to the plant's current state.
+    fn answer(p: &PlantTick, id: u64, status: ControllerStatus, tau: Vec6) -> JointTorque {
+        JointTorque {
+            contract_version: CONTRACT_VERSION,
+            controller_status: status as u32,
+            tick: p.tick(),
+            controller_id: id,
+            tau: tau.into(),
+        }
+    }
+
+    fn events(o: &TickOutcome) -> Vec<PlantEvent> {
+        o.events.iter().map(|r| r.event).collect()
+    }
+
+    fn bits(v: &Vec6) -> [u64; 6] {
+        std::array::from_fn(|i| v[i].to_bits())
+    }
+
+    /// The safe stop's torque as the gate's docs state it: `g(q) − D q̇`, with D per joint capped
+    /// at `0.3 M_ii(q₀) / T` for the start pose's mass matrix (the gate fixes it at start).
+    fn safe_stop_torque(s: &Scenario, physics: &Physics) -> Vec6 {
+        let start = twin(s);
+        let d = crate::gate::safe_stop_damping(
+            s.loop_.safe_stop_damping_nms,
+            &start.robot().mass_matrix(&start.q()).diagonal(),
+            s.loop_.period_s,
+        );
+        physics.gravity_torque() - physics.qd().component_mul(&Vec6::from(d))
+    }
+
+    /// A small torque on top of gravity compensation: the arm moves, slowly.
+    fn nudge() -> Vec6 {
+        Vec6::new(2.0, -1.0, 0.5, 0.02, 0.01, 0.005)
+    }
+
+    #[test]
+    fn the_first_state_is_tick_zero_at_rest_waiting_in_lockstep() {
+        let s = scenario();
+        let p = plant(&s);
+        let (state, wrench) = p.outputs();
+        assert_eq!((state.tick, wrench.tick), (0, 0));
+        assert_eq!(state.sim_time_s, 0.0);
+        assert_eq!(state.plant_status, PlantStatus::WaitingForController as u32);
+        assert_eq!(state.flags, state_flags::LOCKSTEP, "no contact, no reflex, nothing held yet");
+        assert_eq!(state.q, <[f64; 6]>::from(p.physics().q()));
+        assert_eq!(state.qd, [0.0; 6]);
+        assert_eq!(state.period_s, s.loop_.period_s);
+    }
+
+    #[test]
+    fn without_a_controller_the_plant_holds_the_safe_stop_torque_and_counts_no_miss() {
+        let s = scenario();
+        let mut p = plant(&s);
+        let mut t = twin(&s);
+        let q0 = p.physics().q();
+        for k in 0..100 {
+            let expected = safe_stop_torque(&s, &t);
+            let o = p.advance(None);
+            assert_eq!(bits(&o.decision.tau), bits(&expected), "tick {k}");
+            assert!(o.decision.held && !o.decision.missed && o.events.is_empty(), "tick {k}: {:?}", o.decision);
+            assert_eq!(o.applied.tick, recordings::NEVER_ANSWERED);
+            assert_eq!(o.applied.controller_status, recordings::STATUS_NO_ANSWER);
+            t.step_tick(&expected);
+        }
+        let (state, _) = p.outputs();
+        assert_eq!((state.tick, state.consecutive_misses, state.total_misses), (100, 0, 0));
+        assert_eq!(state.plant_status, PlantStatus::WaitingForController as u32);
+        assert!(state.flags & state_flags::TORQUE_HELD != 0);
+        assert!((p.physics().q() - q0).norm() < 1e-9, "the arm drifted {}", (p.physics().q() - q0).norm());
+        assert_eq!(bits(&p.physics().q()), bits(&t.q()), "the tick integrates exactly what it applied");
+    }
+
+    #[test]
+    fn the_first_controller_is_blended_in_on_a_straight_line_then_applied_exactly() {
+        let s = scenario();
+        let n = (s.loop_.takeover_blend_s / s.loop_.period_s).round() as u32;
+        assert_eq!(n, 50);
+        let mut p = plant(&s);
+        let mut t = twin(&s);
+        for k in 1..=2 * n {
+            let tau = t.gravity_torque() + nudge();
+            let from = safe_stop_torque(&s, &t);
+            let answered = p.tick();
+            let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Active, tau)));
+            let expected = if k <= n { from + (tau - from) * (f64::from(k) / f64::from(n)) } else { tau };
+            assert!((o.decision.tau - expected).norm() < 1e-12, "tick {k}: {} vs {}", o.decision.tau, expected);
+            if k > n {
+                // (At k = n the line's end is `from + (τ − from)·1`, τ to rounding.)
+                assert_eq!(bits(&o.decision.tau), bits(&tau), "tick {k}: after the blend the answer is applied as sent");
+            }
+            assert!(!o.decision.held && !o.decision.missed);
+            assert_eq!((o.applied.tick, o.applied.controller_id), (answered, 7));
+            let ev = events(&o);
+            if k == 1 {
+                assert_eq!(ev, vec![PlantEvent::ControllerChange { old: None, new: 7 }]);
+            } else {
+                assert!(ev.is_empty(), "tick {k}: {ev:?}");
+            }
+            t.step_tick(&o.decision.tau);
+            assert_eq!(bits(&p.physics().q()), bits(&t.q()), "tick {k}");
+            let (state, _) = p.outputs();
+            assert_eq!(state.plant_status, PlantStatus::Running as u32);
+            assert_eq!(state.tau_applied, <[f64; 6]>::from(o.decision.tau));
+        }
+        assert!(p.physics().qd().norm() > 1e-4, "the nudge moved the arm");
+    }
+
+    /// The plant after `ticks` answered ticks of controller 7 (past its blend).
+    fn running(s: &Scenario, ticks: u32) -> PlantTick {
+        let mut p = plant(s);
+        for _ in 0..ticks {
+            let tau = p.physics().gravity_torque() + nudge();
+            p.advance(Some(&answer(&p, 7, ControllerStatus::Active, tau)));
+        }
+        p
+    }
+
+    #[test]
+    fn misses_hold_the_last_torque_then_safe_stop_at_the_limit_then_an_answer_clears_it() {
+        let s = scenario();
+        let limit = s.loop_.max_consecutive_misses;
+        let mut p = running(&s, 60);
+        let last = p.gate().last_applied();
+        for m in 1..=limit {
+            let tick = p.tick();
+            let o = p.advance(None);
+            assert!(o.decision.held && o.decision.missed);
+            let ev = events(&o);
+            if m == 1 {
+                assert_eq!(bits(&o.decision.tau), bits(&last), "the first miss holds the last torque");
+                assert_eq!(ev, vec![PlantEvent::MissStreak { total_misses: 1 }]);
+                assert_eq!(p.outputs().0.plant_status, PlantStatus::HoldingTorque as u32);
+            } else if m < limit {
+                assert_eq!(bits(&o.decision.tau), bits(&last), "miss {m}");
+                assert!(ev.is_empty(), "miss {m}: {ev:?}");
+            } else {
+                assert_eq!(ev, vec![PlantEvent::SafeStop(SafeStopCause::Misses(limit))]);
+                assert_eq!(p.first_ticks().safe_stop, Some(tick));
+                assert_eq!(p.outputs().0.plant_status, PlantStatus::SafeStop as u32);
+            }
+        }
+        // In the safe stop the torque is g(q) − D q̇ of each tick's state.
+        let expected = safe_stop_torque(&s, p.physics());
+        let o = p.advance(None);
+        assert_eq!(bits(&o.decision.tau), bits(&expected));
+        let (state, _) = p.outputs();
+        assert_eq!((state.consecutive_misses, state.total_misses), (limit + 1, u64::from(limit) + 1));
+        // The same controller answers again: the safe stop clears, no controller change, and it
+        // blends in from the safe stop.
+        let tau = p.physics().gravity_torque() + nudge();
+        let from = safe_stop_torque(&s, p.physics());
+        let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Active, tau)));
+        assert_eq!(events(&o), vec![PlantEvent::SafeStopCleared]);
+        assert!((o.decision.tau - (from + (tau - from) / 50.0)).norm() < 1e-12);
+        assert_eq!(p.outputs().0.consecutive_misses, 0);
+    }
+
+    #[test]
+    fn a_refused_torque_is_one_event_per_streak_and_flags_the_next_state() {
+        let s = scenario();
+        let mut p = running(&s, 60);
+        let mut bad = p.physics().gravity_torque();
+        bad[2] = f64::NAN;
+        let tick = p.tick();
+        let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Active, bad)));
+        assert!(o.decision.refused.is_some() && o.decision.held && o.decision.missed);
+        let ev = events(&o);
+        assert!(matches!(ev[..], [PlantEvent::Refused(_), PlantEvent::MissStreak { total_misses: 1 }]), "{ev:?}");
+        assert_eq!(p.first_ticks().refusal, Some(tick));
+        assert!(p.outputs().0.flags & state_flags::TORQUE_REFUSED != 0);
+        let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Active, bad)));
+        assert!(o.decision.refused.is_some() && events(&o).is_empty(), "the streak's second refusal is not a new event");
+        assert_eq!(p.first_ticks().refusal, Some(tick));
+        let good = p.physics().gravity_torque();
+        let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Active, good)));
+        assert!(o.decision.refused.is_none() && events(&o).is_empty());
+        assert_eq!(p.outputs().0.flags & (state_flags::TORQUE_REFUSED | state_flags::TORQUE_HELD), 0);
+        assert_eq!(p.gate().refusals(), 2);
+    }
+
+    #[test]
+    fn a_controller_fault_is_a_safe_stop_not_a_miss() {
+        let s = scenario();
+        let mut p = running(&s, 60);
+        let expected = safe_stop_torque(&s, p.physics());
+        let tick = p.tick();
+        let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Fault, nudge())));
+        assert_eq!(events(&o), vec![PlantEvent::SafeStop(SafeStopCause::ControllerFault)]);
+        assert_eq!(bits(&o.decision.tau), bits(&expected), "the fault's torque is not applied");
+        assert!(o.decision.held && !o.decision.missed);
+        assert_eq!(p.first_ticks().safe_stop, Some(tick));
+        assert_eq!(p.outputs().0.total_misses, 0);
+    }
+
+    #[test]
+    fn a_new_controller_is_blended_in_from_the_held_torque() {
+        let s = scenario();
+        let mut p = running(&s, 60);
+        let held = p.gate().last_applied();
+        let tau = p.physics().gravity_torque() - nudge();
+        let o = p.advance(Some(&answer(&p, 9, ControllerStatus::Starting, tau)));
+        assert_eq!(events(&o), vec![PlantEvent::ControllerChange { old: Some(7), new: 9 }]);
+        assert!((o.decision.tau - (held + (tau - held) / 50.0)).norm() < 1e-12);
+        assert_eq!(o.applied.controller_id, 9);
+    }
+
+    #[test]
+    fn a_reflex_latches_the_safe_stop_once_until_the_controller_acknowledges_it() {
+        // A TCP speed limit of 1 mm/s: the nudge crosses it within the run.
+        let mut s = scenario();
+        s.safety.max_tcp_speed_mps = 1e-3;
+        let mut p = plant(&s);
+        let mut reflex_tick = None;
+        for _ in 0..2000 {
+            let tau = p.physics().gravity_torque() + nudge() * 5.0;
+            let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Active, tau)));
+            let reflexes = o.events.iter().filter(|r| matches!(r.event, PlantEvent::Reflex(_))).count();
+            if reflex_tick.is_none() {
+                if let Some(r) = o.events.reflex() {
+                    assert!(matches!(r, crate::limits::Reflex::TcpSpeed { limit_mps, .. } if limit_mps == 1e-3), "{r:?}");
+                    assert!(p.physics().tcp_speed_mps() > 1e-3);
+                    reflex_tick = Some(p.tick());
+                }
+            } else {
+                assert_eq!(reflexes, 0, "a latched reflex is raised once");
+                // Answered but not acknowledged: the safe stop's torque, not the answer.
+                assert!(o.decision.held && !o.decision.missed);
+            }
+            if reflex_tick.is_some_and(|t| p.tick() > t + 5) {
+                break;
+            }
+        }
+        let t = reflex_tick.expect("the reflex tripped");
+        assert_eq!(p.first_ticks().reflex, Some(t));
+        assert_eq!(p.first_ticks().safe_stop, Some(t));
+        let (state, _) = p.outputs();
+        assert!(state.flags & state_flags::REFLEX != 0);
+        assert_eq!(state.plant_status, PlantStatus::SafeStop as u32);
+        // Acknowledged with status starting: cleared, blended in from the safe stop.
+        let tau = p.physics().gravity_torque();
+        let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Starting, tau)));
+        assert!(o.decision.events.reflex_acknowledged);
+        assert_eq!(events(&o)[0], PlantEvent::SafeStopCleared);
+        assert!(!o.decision.held);
+    }
+
+    #[test]
+    fn a_controller_gone_is_a_safe_stop_once_and_nothing_before_any_controller() {
+        let s = scenario();
+        let mut p = plant(&s);
+        assert_eq!(p.controller_gone(), None, "nobody was there to go");
+        let mut p = running(&s, 10);
+        let tick = p.tick();
+        let r = p.controller_gone().expect("safe stop");
+        assert_eq!((r.tick, r.event), (tick, PlantEvent::SafeStop(SafeStopCause::ControllerGone)));
+        assert_eq!(p.first_ticks().safe_stop, Some(tick));
+        assert_eq!(p.controller_gone(), None, "already in the safe stop");
+    }
+
+    #[test]
+    fn the_servo_path_applies_its_torque_as_the_answer_to_its_own_tick() {
+        let s = scenario();
+        let mut p = plant(&s);
+        let mut t = twin(&s);
+        for _ in 0..20 {
+            let tau = t.gravity_torque() + nudge();
+            let tick = p.tick();
+            let o = p.advance_servo(&tau);
+            assert_eq!(bits(&o.decision.tau), bits(&tau));
+            assert_eq!(o.applied.tick, tick);
+            assert!(o.events.is_empty());
+            t.step_tick(&tau);
+            assert_eq!(bits(&p.physics().q()), bits(&t.q()));
+            assert_eq!(p.outputs().0.tau_applied, <[f64; 6]>::from(tau));
+        }
+    }
+}

@@ -25,18 +25,29 @@ pub enum PlantEvent {
     /// The first refused torque of a streak (a bad controller refuses every tick).
     Refused(Refusal),
     /// The first miss after a good tick; the gate's total misses after it.
-    MissStreak { total_misses: u64 },
+    MissStreak {
+        total_misses: u64,
+    },
     SafeStop(SafeStopCause),
     SafeStopCleared,
     /// A controller took over (`old` None: the first controller connected).
-    ControllerChange { old: Option<u64>, new: u64 },
+    ControllerChange {
+        old: Option<u64>,
+        new: u64,
+    },
     /// The force/torque sensor's reading at its range (sensor frame, N and N m).
-    SensorSaturated { reading: [f64; 6] },
+    SensorSaturated {
+        reading: [f64; 6],
+    },
     SensorWithinRange,
     /// A reflex: safe stop until the controller acknowledges.
     Reflex(Reflex),
     /// A joint entered its end stop at `q_rad` (its range `range_rad`); `joint` counts from 0.
-    EndStop { joint: usize, q_rad: f64, range_rad: [f64; 2] },
+    EndStop {
+        joint: usize,
+        q_rad: f64,
+        range_rad: [f64; 2],
+    },
 }
 
 /// How loudly an event is logged.
@@ -215,6 +226,22 @@ impl EventHandOn {
 pub fn record_event(recorder: Option<&mut Recorder>, tick: u64, sim_time_s: f64, kind: EventKind, text: &str) {
     if let Some(r) = recorder {
         r.record_event(&EventRecord::new(tick, sim_time_s, kind, text));
+    }
+}
+
+/// Queue slots a lockstep tick waits for before it advances: its tick record and the events one
+/// tick can raise ([`crate::tick_events::TICK_EVENTS_MAX`] and the driver's own) with room to spare.
+const LOCKSTEP_RECORD_SLOTS: usize = 16;
+/// The longest a lockstep tick waits for the writer; after that the record is a counted drop
+/// (a writer that no longer drains its queue must not hang the run).
+const LOCKSTEP_RECORD_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Lockstep has no deadline: before a tick advances, wait for the writer (on a loaded host it
+/// falls behind a plant running 30x real time) instead of dropping the tick's record and events.
+/// Every lockstep driver (torque loop, EGM, in process) calls it; real time never waits.
+pub fn make_room_for_tick(recorder: Option<&mut Recorder>) {
+    if let Some(r) = recorder {
+        r.wait_for_room(LOCKSTEP_RECORD_SLOTS, LOCKSTEP_RECORD_WAIT);
     }
 }
 

@@ -458,7 +458,6 @@ pub fn free_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
-
 /// Wait until someone holds UDP `port` on loopback (the EGM sensor, Python client or
 /// `egm-controller`, has bound it).
 pub fn wait_bound(port: u16, client: &mut Daemon) {
@@ -472,7 +471,6 @@ pub fn wait_bound(port: u16, client: &mut Daemon) {
         std::thread::sleep(Duration::from_millis(20));
     }
 }
-
 
 /// `scenarios/egm.toml` with the sensor on `port`, written into `dir`.
 pub fn egm_scenario_on(dir: &Path, port: u16) -> PathBuf {

@@ -128,7 +128,7 @@ fn handing_every_tick_to_the_recorder_does_not_allocate() {
         let a0 = allocations();
         let (state, wrench) = plant.outputs();
         let (torque, diag) = controller.process(&state, &wrench);
-        plant_sim::loop_lockstep::make_room_for_tick(Some(&mut recorder));
+        plant_sim::tick_events::make_room_for_tick(Some(&mut recorder));
         let outcome = plant.advance(Some(&torque));
         hand_on.hand_on(&outcome.events, Some(&mut recorder));
         let timing = TimingRecord { missed: outcome.decision.missed, ..TimingRecord::default() };

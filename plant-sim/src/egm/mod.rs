@@ -44,8 +44,8 @@ use scenarios::{Mode, Scenario};
 use crate::pacer::Pacer;
 use crate::recording::{EgmRecord, EventKind, EventRecord, Recorder, TimingRecord};
 use crate::rt;
-use crate::stack_text::StackText;
 use crate::signals::Signals;
+use crate::stack_text::StackText;
 use crate::stats::LoopStats;
 use crate::tick::PlantTick;
 use crate::tick_events::{EventHandOn, PlantEvent};
@@ -292,186 +292,251 @@ pub struct EgmStats {
     pub session_ended_tick: Option<u64>,
 }
 
+/// What one run of the EGM loop carries from tick to tick besides the session.
+struct Run {
+    stats: LoopStats,
+    es: EgmStats,
+    hand_on: EventHandOn,
+    pacer: Pacer,
+    buf: [u8; 2048],
+    origin_ns: u64,
+    /// Monotonic time of the last valid sensor message (0: the comm timeout has passed).
+    last_valid_ns: u64,
+    /// The last sensor message was refused (a streak is one event).
+    refusing: bool,
+    /// Monotonic time and tick of the first valid sensor message.
+    first_answer: Option<(u64, u64)>,
+    /// Monotonic time the last `EgmRobot` went out.
+    last_sent_ns: u64,
+    /// The `/egm` row of the current cycle.
+    cycle: EgmRecord,
+}
+
+/// The replies one tick took.
+#[derive(Default)]
+struct Replies {
+    taken: u32,
+    accepted: u32,
+    /// The tick took a reply (valid or not): its latency is measured.
+    answered: bool,
+}
+
 impl EgmLoop<'_> {
     /// Run until `n_ticks` ticks are integrated or a stop signal arrives.
     pub fn run(&mut self) -> (LoopStats, EgmStats) {
         let p = EgmParams { sensor: self.params.sensor, ..self.params };
-        let mut stats = LoopStats::empty();
-        let mut es = EgmStats::default();
-        let mut buf = [0u8; 2048];
-        let mut hand_on = EventHandOn::new(p.period_ns);
         let origin_ns = rt::now_mono_ns();
-        let mut pacer = Pacer::new(origin_ns, p.period_ns);
-        let mut last_valid_ns = origin_ns;
-        let mut refusing = false;
-        let mut first_answer: Option<(u64, u64)> = None;
+        let mut run = Run {
+            stats: LoopStats::empty(),
+            es: EgmStats::default(),
+            hand_on: EventHandOn::new(p.period_ns),
+            pacer: Pacer::new(origin_ns, p.period_ns),
+            buf: [0u8; 2048],
+            origin_ns,
+            last_valid_ns: origin_ns,
+            refusing: false,
+            first_answer: None,
+            last_sent_ns: origin_ns,
+            cycle: EgmRecord { servo_lag_s: self.servo.params().lag_s(), ..EgmRecord::default() },
+        };
         let mut tick: u64 = self.plant.tick();
-        let mut last_sent_ns = origin_ns;
-        let mut cycle = EgmRecord { servo_lag_s: self.servo.params().lag_s(), ..EgmRecord::default() };
         while tick < p.n_ticks {
             if self.signals.stop_requested() {
-                stats.stopped_by_signal = true;
+                run.stats.stopped_by_signal = true;
                 break;
             }
             if p.mode == Mode::Realtime {
-                pacer.pace(tick, &mut stats, self.recorder.as_deref_mut());
+                run.pacer.pace(tick, &mut run.stats, self.recorder.as_deref_mut());
             }
             let wake_ns = rt::now_mono_ns();
             let publish_wall_ns = rt::now_wall_ns();
             let cycle_tick = tick.is_multiple_of(p.cycle_ticks);
-            let mut latency_ns = 0u64;
-            let mut answered = false;
             // 1. The EGM exchange of this cycle.
-            if cycle_tick && self.state != SessionState::Stopped {
-                es.cycles += 1;
-                self.send_robot(tick);
-                last_sent_ns = rt::now_mono_ns();
-                if p.mode == Mode::Lockstep {
-                    if self.state == SessionState::Waiting {
-                        while !self.signals.stop_requested() && !self.wait_readable(LOCKSTEP_RESEND) {
-                            if self.signals.stop_requested() {
-                                break;
-                            }
-                            self.robot_seqno = self.robot_seqno.wrapping_sub(1);
-                            self.send_robot(tick);
-                        }
-                    } else if !self.wait_readable(Duration::from_nanos(p.comm_timeout_ns)) && !self.signals.stop_requested() {
-                        // Nothing in comm_timeout: the session ends below.
-                        last_valid_ns = 0;
-                    }
-                    if self.signals.stop_requested() {
-                        stats.stopped_by_signal = true;
-                        break;
-                    }
-                }
+            if !self.exchange(&p, tick, cycle_tick, &mut run) {
+                run.stats.stopped_by_signal = true;
+                break;
+            }
+            // Lockstep has no deadline: wait for the writer rather than drop this tick's records.
+            if p.mode == Mode::Lockstep {
+                crate::tick_events::make_room_for_tick(self.recorder.as_deref_mut());
             }
             // 2. Take the replies: lockstep one per cycle, real time all that arrived.
-            let take = if p.mode == Mode::Lockstep { usize::from(cycle_tick && self.state != SessionState::Stopped) } else { usize::MAX };
-            let mut taken = 0;
-            let mut accepted_now = 0;
-            while taken < take && self.state != SessionState::Stopped {
-                let Some(result) = self.take_one(&mut buf) else { break };
-                taken += 1;
-                answered = true;
-                match result {
-                    Ok(a) => {
-                        es.accepted += 1;
-                        accepted_now += 1;
-                        cycle.sensor_seqno = a.seqno;
-                        cycle.joints_ref_deg = a.joints_deg;
-                        cycle.speed_ref_deg_s = a.speed_deg_s;
-                        refusing = false;
-                        last_valid_ns = rt::now_mono_ns();
-                        self.servo.set_reference(a.q_ref, a.qd_ref);
-                        if self.state == SessionState::Waiting {
-                            self.state = SessionState::Running;
-                            first_answer = Some((wake_ns, tick));
-                            let mut s = StackText::new();
-                            let _ = write!(s, "tick {tick}: EGM session started: the sensor at {} answered (seqno {})", p.sensor, a.seqno);
-                            tracing::info!("{}", s.as_str());
-                            self.event(tick, EventKind::EgmSession, s.as_str());
-                        }
-                    }
-                    Err(r) => {
-                        es.refused += 1;
-                        stats.first_refusal_tick.get_or_insert(tick);
-                        if !refusing {
-                            let mut s = StackText::new();
-                            let _ = write!(s, "tick {tick}: EGM sensor message refused: {r}");
-                            tracing::warn!("{}", s.as_str());
-                            self.event(tick, EventKind::EgmRefused, s.as_str());
-                        }
-                        refusing = true;
-                    }
-                }
-            }
+            let replies = self.take_replies(&p, tick, wake_ns, cycle_tick, &mut run);
             // Reply latency: from this cycle's EgmRobot to the reply taken (real time: at the tick
             // the reply was found, so to within a tick).
-            if answered {
-                latency_ns = rt::now_mono_ns() - last_sent_ns;
-                stats.round_trip.record(latency_ns);
+            let latency_ns = if replies.answered { rt::now_mono_ns() - run.last_sent_ns } else { 0 };
+            if replies.answered {
+                run.stats.round_trip.record(latency_ns);
             }
-            // /egm: one row per cycle, written at its end (lockstep: the reply came at its start).
-            if cycle_tick {
-                cycle.tick = tick;
-                cycle.sim_time_s = tick as f64 * p.period_ns as f64 * 1e-9;
-                cycle.robot_seqno = self.robot_seqno;
-                (cycle.replies, cycle.accepted, cycle.reply_latency_ns) = (0, 0, 0);
-            }
-            cycle.replies += taken as u32;
-            cycle.accepted += accepted_now;
-            if answered {
-                cycle.reply_latency_ns = latency_ns;
-            }
-            let cycle_end = if p.mode == Mode::Lockstep { cycle_tick } else { (tick + 1).is_multiple_of(p.cycle_ticks) };
-            if cycle_end && (self.state != SessionState::Stopped || cycle.replies > 0) {
-                cycle.session_state = self.state as u8;
-                cycle.servo_ref_rad = self.servo.servo_reference().into();
-                if let Some(r) = self.recorder.as_deref_mut() {
-                    r.record_egm(&cycle);
-                }
-            }
+            self.record_cycle(&p, tick, cycle_tick, &replies, latency_ns, &mut run);
             // 3. Session timeout: no valid sensor message for comm_timeout (wall clock).
-            if self.state == SessionState::Running && rt::now_mono_ns().saturating_sub(last_valid_ns) > p.comm_timeout_ns {
+            if self.state == SessionState::Running && rt::now_mono_ns().saturating_sub(run.last_valid_ns) > p.comm_timeout_ns {
                 let mut s = StackText::new();
                 let _ = write!(
                     s,
                     "tick {tick}: EGM session ended: no valid sensor message for {} s (egm.comm_timeout_s); the robot holds",
                     p.comm_timeout_ns as f64 * 1e-9
                 );
-                self.end_session(tick, s.as_str(), &mut stats, &mut es);
+                self.end_session(tick, s.as_str(), &mut run.stats, &mut run.es);
             }
-            // 4. The servo's torque over this tick, from the joints the state reports, integrated
-            //    by the plant's tick core.
-            let (mut state, wrench) = self.plant.outputs();
-            state.plant_status = match self.state {
-                SessionState::Waiting => PlantStatus::WaitingForController,
-                SessionState::Running => PlantStatus::Running,
-                SessionState::Stopped => PlantStatus::SafeStop,
-            } as u32;
-            let tau = self.servo.tick(&Vec6::from(state.q), &Vec6::from(state.qd));
-            let tau = Vec6::from_fn(|i, _| tau[i].clamp(-Robot::TORQUE_LIMIT_NM[i], Robot::TORQUE_LIMIT_NM[i]));
-            let pre_ns = rt::now_mono_ns() - wake_ns;
-            let t0 = rt::now_mono_ns();
-            let outcome = self.plant.advance_servo(&tau);
-            // 5. The tick's events; a reflex ends the session (the robot's motion supervision
-            //    stops it).
-            for r in outcome.events.iter() {
-                match r.event {
-                    PlantEvent::Reflex(x) if self.state != SessionState::Stopped => {
-                        stats.reflexes += 1;
-                        stats.first_reflex_tick.get_or_insert(r.tick);
-                        let mut s = StackText::new();
-                        let _ = write!(s, "tick {}: {x}: EGM session ended, the robot holds", r.tick);
-                        tracing::error!("{}", s.as_str());
-                        self.event(r.tick, EventKind::Reflex, s.as_str());
-                        self.end_session(r.tick, "", &mut stats, &mut es);
-                    }
-                    _ => hand_on.one(r, self.recorder.as_deref_mut()),
-                }
-            }
-            // 6. Record.
-            let plant_ns = pre_ns + (rt::now_mono_ns() - t0);
-            stats.plant_compute.record(plant_ns);
+            // 4.-6. The servo's tick through the plant's core, its events, its record.
             let timing = TimingRecord {
                 publish_wall_ns,
-                torque_receive_wall_ns: if answered { rt::now_wall_ns() } else { 0 },
-                round_trip_ns: if answered { latency_ns } else { 0 },
+                torque_receive_wall_ns: if replies.answered { rt::now_wall_ns() } else { 0 },
+                round_trip_ns: latency_ns,
                 period_ns: p.period_ns,
                 missed: false,
-                plant_compute_ns: plant_ns,
+                plant_compute_ns: 0,
                 controller_compute_ns: 0,
                 // The stage stamps are the torque path's (`rig timing`); EGM cycles are in /egm.
                 stages: None,
             };
-            if let Some(r) = self.recorder.as_deref_mut() {
-                r.record_tick(&crate::tick::tick_record(state, wrench, &outcome, None, timing));
-            }
+            self.servo_tick(wake_ns, timing, &mut run);
             tick += 1;
-            pacer.next();
+            run.pacer.next();
         }
-        // The end of the run ends the session too: a last EgmRobot says MCI_STOPPED, so a sensor
-        // can end at once.
+        self.finish(&p, tick, run)
+    }
+
+    /// Step 1 of a tick: on a cycle tick, send `EgmRobot`; in lockstep wait for the sensor's
+    /// reply (waiting: resend every [`LOCKSTEP_RESEND`]; running: up to the comm timeout).
+    /// False: a stop signal came.
+    fn exchange(&mut self, p: &EgmParams, tick: u64, cycle_tick: bool, run: &mut Run) -> bool {
+        if !cycle_tick || self.state == SessionState::Stopped {
+            return true;
+        }
+        run.es.cycles += 1;
+        self.send_robot(tick);
+        run.last_sent_ns = rt::now_mono_ns();
+        if p.mode == Mode::Lockstep {
+            if self.state == SessionState::Waiting {
+                while !self.signals.stop_requested() && !self.wait_readable(LOCKSTEP_RESEND) {
+                    if self.signals.stop_requested() {
+                        break;
+                    }
+                    self.robot_seqno = self.robot_seqno.wrapping_sub(1);
+                    self.send_robot(tick);
+                }
+            } else if !self.wait_readable(Duration::from_nanos(p.comm_timeout_ns)) && !self.signals.stop_requested() {
+                // Nothing in comm_timeout: the session ends in step 3.
+                run.last_valid_ns = 0;
+            }
+            if self.signals.stop_requested() {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// Step 2: take the sensor's replies (lockstep: the one of this cycle; real time: all that
+    /// arrived), check each, set the servo's reference from the valid ones.
+    fn take_replies(&mut self, p: &EgmParams, tick: u64, wake_ns: u64, cycle_tick: bool, run: &mut Run) -> Replies {
+        let take = if p.mode == Mode::Lockstep { usize::from(cycle_tick && self.state != SessionState::Stopped) } else { usize::MAX };
+        let mut r = Replies::default();
+        while (r.taken as usize) < take && self.state != SessionState::Stopped {
+            let Some(result) = self.take_one(&mut run.buf) else { break };
+            r.taken += 1;
+            r.answered = true;
+            match result {
+                Ok(a) => {
+                    run.es.accepted += 1;
+                    r.accepted += 1;
+                    run.cycle.sensor_seqno = a.seqno;
+                    run.cycle.joints_ref_deg = a.joints_deg;
+                    run.cycle.speed_ref_deg_s = a.speed_deg_s;
+                    run.refusing = false;
+                    run.last_valid_ns = rt::now_mono_ns();
+                    self.servo.set_reference(a.q_ref, a.qd_ref);
+                    if self.state == SessionState::Waiting {
+                        self.state = SessionState::Running;
+                        run.first_answer = Some((wake_ns, tick));
+                        let mut s = StackText::new();
+                        let _ = write!(s, "tick {tick}: EGM session started: the sensor at {} answered (seqno {})", p.sensor, a.seqno);
+                        tracing::info!("{}", s.as_str());
+                        self.event(tick, EventKind::EgmSession, s.as_str());
+                    }
+                }
+                Err(refusal) => {
+                    run.es.refused += 1;
+                    run.stats.first_refusal_tick.get_or_insert(tick);
+                    if !run.refusing {
+                        let mut s = StackText::new();
+                        let _ = write!(s, "tick {tick}: EGM sensor message refused: {refusal}");
+                        tracing::warn!("{}", s.as_str());
+                        self.event(tick, EventKind::EgmRefused, s.as_str());
+                    }
+                    run.refusing = true;
+                }
+            }
+        }
+        r
+    }
+
+    /// `/egm`: one row per cycle, written at its end (lockstep: the reply came at its start).
+    fn record_cycle(&mut self, p: &EgmParams, tick: u64, cycle_tick: bool, replies: &Replies, latency_ns: u64, run: &mut Run) {
+        let cycle = &mut run.cycle;
+        if cycle_tick {
+            cycle.tick = tick;
+            cycle.sim_time_s = tick as f64 * p.period_ns as f64 * 1e-9;
+            cycle.robot_seqno = self.robot_seqno;
+            (cycle.replies, cycle.accepted, cycle.reply_latency_ns) = (0, 0, 0);
+        }
+        cycle.replies += replies.taken;
+        cycle.accepted += replies.accepted;
+        if replies.answered {
+            cycle.reply_latency_ns = latency_ns;
+        }
+        let cycle_end = if p.mode == Mode::Lockstep { cycle_tick } else { (tick + 1).is_multiple_of(p.cycle_ticks) };
+        if cycle_end && (self.state != SessionState::Stopped || cycle.replies > 0) {
+            cycle.session_state = self.state as u8;
+            cycle.servo_ref_rad = self.servo.servo_reference().into();
+            if let Some(r) = self.recorder.as_deref_mut() {
+                r.record_egm(cycle);
+            }
+        }
+    }
+
+    /// Steps 4-6: the servo's torque over this tick, from the joints the state reports,
+    /// integrated by the plant's tick core; the tick's events (a reflex ends the session: the
+    /// robot's motion supervision stops it); the tick's record.
+    fn servo_tick(&mut self, wake_ns: u64, mut timing: TimingRecord, run: &mut Run) {
+        let (mut state, wrench) = self.plant.outputs();
+        state.plant_status = match self.state {
+            SessionState::Waiting => PlantStatus::WaitingForController,
+            SessionState::Running => PlantStatus::Running,
+            SessionState::Stopped => PlantStatus::SafeStop,
+        } as u32;
+        let tau = self.servo.tick(&Vec6::from(state.q), &Vec6::from(state.qd));
+        let tau = Vec6::from_fn(|i, _| tau[i].clamp(-Robot::TORQUE_LIMIT_NM[i], Robot::TORQUE_LIMIT_NM[i]));
+        let pre_ns = rt::now_mono_ns() - wake_ns;
+        let t0 = rt::now_mono_ns();
+        let outcome = self.plant.advance_servo(&tau);
+        for r in outcome.events.iter() {
+            match r.event {
+                PlantEvent::Reflex(x) if self.state != SessionState::Stopped => {
+                    run.stats.reflexes += 1;
+                    run.stats.first_reflex_tick.get_or_insert(r.tick);
+                    let mut s = StackText::new();
+                    let _ = write!(s, "tick {}: {x}: EGM session ended, the robot holds", r.tick);
+                    tracing::error!("{}", s.as_str());
+                    self.event(r.tick, EventKind::Reflex, s.as_str());
+                    self.end_session(r.tick, "", &mut run.stats, &mut run.es);
+                }
+                _ => run.hand_on.one(r, self.recorder.as_deref_mut()),
+            }
+        }
+        let plant_ns = pre_ns + (rt::now_mono_ns() - t0);
+        run.stats.plant_compute.record(plant_ns);
+        timing.plant_compute_ns = plant_ns;
+        if let Some(r) = self.recorder.as_deref_mut() {
+            r.record_tick(&crate::tick::tick_record(state, wrench, &outcome, None, timing));
+        }
+    }
+
+    /// The run's end: it ends the session too (a last `EgmRobot` says `MCI_STOPPED`, so a sensor
+    /// can end at once); the totals and the stop event.
+    fn finish(&mut self, p: &EgmParams, tick: u64, run: Run) -> (LoopStats, EgmStats) {
+        let Run { mut stats, es, origin_ns, first_answer, .. } = run;
         if self.state != SessionState::Stopped {
             self.state = SessionState::Stopped;
             self.send_robot(tick);
