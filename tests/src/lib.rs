@@ -426,33 +426,6 @@ pub fn client_examples() -> &'static ClientExamples {
     })
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use std::time::SystemTime;
-
-    /// A source modified after the binary (a space in its path included) is named; older sources
-    /// are not.
-    #[test]
-    fn a_source_newer_than_its_binary_is_found_from_the_dep_info() {
-        let d = temp_dir(&unique_rig("dep-info"));
-        let (exe, old_src, new_src) = (d.join("tool"), d.join("old.rs"), d.join("with space.rs"));
-        let at = |p: &Path, secs: u64| {
-            let f = std::fs::File::create(p).unwrap();
-            f.set_modified(SystemTime::UNIX_EPOCH + Duration::from_secs(secs)).unwrap();
-        };
-        at(&old_src, 1_000);
-        at(&exe, 2_000);
-        at(&new_src, 1_500);
-        let dep = d.join("tool.d");
-        let escaped = new_src.display().to_string().replace(' ', "\\ ");
-        std::fs::write(&dep, format!("{}: {} {escaped}\n", exe.display(), old_src.display())).unwrap();
-        assert_eq!(source_newer_than(&exe, &dep), None);
-        at(&new_src, 3_000);
-        assert_eq!(source_newer_than(&exe, &dep), Some(new_src));
-    }
-}
-
 /// A UDP port free right now (the sensor binds it next).
 pub fn free_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
@@ -479,4 +452,31 @@ pub fn egm_scenario_on(dir: &Path, port: u16) -> PathBuf {
     let p = dir.join("egm.toml");
     std::fs::write(&p, text.replace("127.0.0.1:6510", &format!("127.0.0.1:{port}"))).unwrap();
     p
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::SystemTime;
+
+    /// A source modified after the binary (a space in its path included) is named; older sources
+    /// are not.
+    #[test]
+    fn a_source_newer_than_its_binary_is_found_from_the_dep_info() {
+        let d = temp_dir(&unique_rig("dep-info"));
+        let (exe, old_src, new_src) = (d.join("tool"), d.join("old.rs"), d.join("with space.rs"));
+        let at = |p: &Path, secs: u64| {
+            let f = std::fs::File::create(p).unwrap();
+            f.set_modified(SystemTime::UNIX_EPOCH + Duration::from_secs(secs)).unwrap();
+        };
+        at(&old_src, 1_000);
+        at(&exe, 2_000);
+        at(&new_src, 1_500);
+        let dep = d.join("tool.d");
+        let escaped = new_src.display().to_string().replace(' ', "\\ ");
+        std::fs::write(&dep, format!("{}: {} {escaped}\n", exe.display(), old_src.display())).unwrap();
+        assert_eq!(source_newer_than(&exe, &dep), None);
+        at(&new_src, 3_000);
+        assert_eq!(source_newer_than(&exe, &dep), Some(new_src));
+    }
 }
