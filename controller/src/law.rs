@@ -264,14 +264,9 @@ impl ControlLaw {
     }
 }
 
-/// The controller's robot model: the scenario's arm and the tool it believes ([`scenarios::geometry::controller_tool`]) with armature
-/// and viscous friction, deliberately WITHOUT `robot.plant_inertia_scale` (that is the plant's
-/// mismatch, like `[mismatch] link_inertia_scale` and `[drives]`).
-pub fn controller_robot(s: &scenarios::Scenario) -> Robot {
-    Robot::irb2400_with_tool(scenarios::geometry::controller_tool(s))
-        .with_armature(Vec6::from(s.robot.armature_kgm2))
-        .with_viscous(Vec6::from(s.robot.viscous_nms))
-}
+/// The controller's robot model, built where the plant's is ([`scenarios::geometry`]): the arm
+/// with the tool it believes, without the plant's mismatch.
+pub use scenarios::geometry::controller_robot;
 
 #[cfg(test)]
 mod tests {

@@ -185,7 +185,17 @@ pub fn step(
 
 #[cfg(test)]
 mod tests {
+    //! Each branch of [`Controller::process`] against a closed form or against a twin controller
+    //! that saw the ticks the branch should make it equal to. A fake plant: states at rest where
+    //! the test puts the arm, wrenches as the test sets them.
+
     use super::*;
+    use crate::reference::{Phase, REENGAGE_S};
+    use messages::CONTRACT_VERSION;
+    use nalgebra::{Isometry3, Translation3};
+    use robot::Robot;
+    use scenarios::geometry::{start_tcp_pose, start_tcp_task_m};
+    use std::f64::consts::TAU;
 
     #[test]
     fn controller_robot_ignores_plant_inertia_scale() {
@@ -193,5 +203,257 @@ mod tests {
         let a = controller_robot(&s).total_mass_kg();
         s.robot.plant_inertia_scale = 1.1;
         assert_eq!(controller_robot(&s).total_mass_kg(), a);
+    }
+
+    /// The default scenario's controller (sensor processing off: the law sees the wrench as
+    /// sent), its robot model and the start pose q0.
+    fn setup() -> (Scenario, Controller, Robot, Vec6) {
+        let s = Scenario::default();
+        let c = Controller::from_scenario(&s).with_id(7);
+        assert!(!c.sensing().is_active());
+        let robot = controller_robot(&s);
+        let q0 = robot.ik_tcp(&start_tcp_pose(&s), &robot::ik_seed_tool_down()).unwrap();
+        (s, c, robot, q0)
+    }
+
+    /// The joints that put the TCP `offset_task_m` (task axes) from the start point, tool down.
+    fn q_at(s: &Scenario, robot: &Robot, offset_task_m: Vector3<f64>) -> Vec6 {
+        let p = TaskFrame::from_scenario(s).point_to_base(&(start_tcp_task_m(s) + offset_task_m));
+        let pose = Isometry3::from_parts(Translation3::from(p), start_tcp_pose(s).rotation);
+        robot.ik_tcp(&pose, &robot::ik_seed_tool_down()).unwrap()
+    }
+
+    /// The TCP of `q` in task coordinates.
+    fn tcp_task(s: &Scenario, robot: &Robot, q: &Vec6) -> Vector3<f64> {
+        TaskFrame::from_scenario(s).point_to_task(&robot.tcp_pose(q).translation.vector)
+    }
+
+    /// The arm at rest at `q` on tick `tick` (1 kHz) with `status` and `flags`.
+    fn state(tick: u64, status: PlantStatus, q: &Vec6, flags: u32) -> JointState {
+        JointState { flags, ..JointState::at_rest(tick, status, (*q).into()) }
+    }
+
+    /// A force `force_base_n` (base axes, at the TCP) on the tool on tick `tick`, no moment.
+    fn wrench(tick: u64, force_base_n: [f64; 3]) -> Wrench {
+        Wrench { contract_version: CONTRACT_VERSION, frame: WrenchFrame::BaseAtTcp as u32, tick, force: force_base_n, torque: [0.0; 3] }
+    }
+
+    fn tau(t: &JointTorque) -> Vec6 {
+        Vec6::from(t.tau)
+    }
+
+    fn status(t: &JointTorque) -> Option<ControllerStatus> {
+        ControllerStatus::from_u32(t.controller_status)
+    }
+
+    /// Answers `c` gives at rest at `q`, no wrench, `status` and `flags`, for `ticks`.
+    fn run(
+        c: &mut Controller,
+        ticks: std::ops::Range<u64>,
+        st: PlantStatus,
+        q: &Vec6,
+        flags: u32,
+    ) -> Vec<(JointTorque, ControllerDiagnostics)> {
+        ticks.map(|k| c.process(&state(k, st, q, flags), &wrench(k, [0.0; 3]))).collect()
+    }
+
+    /// Normal tracking. Tick 0 at rest at the start pose: the references start there (settle),
+    /// so τ = g(q0). Tick 1, still settling, with the arm displaced by δ at rest: the PD (7.8)
+    /// asks a_x = (−k_p R_bt δ, 0) with k_p = (2π f_m)², J̇ q̇ = 0, so (7.2)-(7.6) give
+    /// τ = M(q1) J(q1)⁻¹ a_x + g(q1).
+    #[test]
+    fn tracking_answers_a_displacement_with_the_pd_through_the_arms_inertia() {
+        let (s, mut c, robot, q0) = setup();
+        let (t0, d0) = c.process(&state(0, PlantStatus::Running, &q0, 0), &wrench(0, [0.0; 3]));
+        let g0 = robot.gravity_torque(&q0);
+        // (to the IK's accuracy: k_p times a 1e-10 m miss is about 1e-6 N m)
+        assert!((tau(&t0) - g0).norm() < 1e-7 * g0.norm(), "{} vs g(q0) {g0}", tau(&t0));
+        assert_eq!(status(&t0), Some(ControllerStatus::Active));
+        assert_eq!((t0.tick, t0.controller_id, t0.contract_version), (0, 7, CONTRACT_VERSION));
+        assert!((Vector3::from(d0.pos_ref_task_m) - start_tcp_task_m(&s)).norm() < 1e-12);
+        assert_eq!(c.reference().phase(), Phase::Settle);
+
+        let delta = Vector3::new(1e-3, -0.5e-3, 2e-3);
+        let q1 = q_at(&s, &robot, delta);
+        let (t1, d1) = c.process(&state(1, PlantStatus::Running, &q1, 0), &wrench(1, [0.0; 3]));
+        let w = TAU * s.controller.motion_bandwidth_hz;
+        let a_lin = TaskFrame::from_scenario(&s).vector_to_base(&(-delta * (w * w)));
+        let a_x = Vec6::new(a_lin.x, a_lin.y, a_lin.z, 0.0, 0.0, 0.0);
+        let a_q = robot.jacobian_tcp(&q1).lu().solve(&a_x).unwrap();
+        let pd = robot.mass_matrix(&q1) * a_q;
+        let expect = pd + robot.gravity_torque(&q1);
+        assert!(pd.norm() > 1.0, "the PD's share must show: {pd}");
+        assert!((tau(&t1) - expect).norm() < 1e-6 * pd.norm(), "{} vs {expect}", tau(&t1));
+        assert!((Vector3::from(d1.pos_err_task_m) + delta).norm() < 1e-9, "{:?}", d1.pos_err_task_m);
+        assert_eq!((status(&t1), t1.tick, d1.tick), (Some(ControllerStatus::Active), 1, 1));
+    }
+
+    /// The first state (a take-over of a running plant) away from the start: the references
+    /// start where the TCP is (the return move), so at rest the answer is g(q), no pull towards
+    /// the start. `restart` makes the next state a first one again; without it the same state
+    /// is pulled back.
+    #[test]
+    fn a_first_state_begins_the_references_where_the_arm_is() {
+        let (s, mut c, robot, _) = setup();
+        let q = q_at(&s, &robot, Vector3::new(0.0, 0.05, -0.02));
+        let (t, d) = c.process(&state(500, PlantStatus::Running, &q, 0), &wrench(500, [0.0; 3]));
+        let g = robot.gravity_torque(&q);
+        assert!((tau(&t) - g).norm() < 1e-9 * g.norm(), "{} vs g(q) {g}", tau(&t));
+        assert_eq!(c.reference().phase(), Phase::Return);
+        assert!((Vector3::from(d.pos_ref_task_m) - tcp_task(&s, &robot, &q)).norm() < 1e-12);
+
+        let q2 = q_at(&s, &robot, Vector3::new(0.01, 0.03, 0.0));
+        let g2 = robot.gravity_torque(&q2);
+        let pulled = c.process(&state(501, PlantStatus::Running, &q2, 0), &wrench(501, [0.0; 3])).0;
+        assert!((tau(&pulled) - g2).norm() > 1.0, "not first: pulled to the reference");
+        c.restart();
+        assert!(c.is_first());
+        let (t2, _) = c.process(&state(502, PlantStatus::Running, &q2, 0), &wrench(502, [0.0; 3]));
+        assert!((tau(&t2) - g2).norm() < 1e-9 * g2.norm(), "{} vs g(q2) {g2}", tau(&t2));
+        assert!(!c.is_first());
+    }
+
+    /// A reflex latched the plant's safe stop (SafeStop with REFLEX): the answer acknowledges it
+    /// as Starting, with the torque re-engaged where the arm is: the references from the
+    /// measured pose, so at rest τ = g(q1), where a running state at the same pose is pulled
+    /// back to the start. Once the plant has cleared the flag the answer is Active again.
+    #[test]
+    fn a_reflex_stop_is_acknowledged_as_starting_with_the_torque_re_engaged_where_the_arm_is() {
+        let (s, mut c, robot, q0) = setup();
+        let mut twin = Controller::from_scenario(&s).with_id(7);
+        run(&mut c, 0..1, PlantStatus::Running, &q0, 0);
+        run(&mut twin, 0..1, PlantStatus::Running, &q0, 0);
+        let q1 = q_at(&s, &robot, Vector3::new(2e-3, 1e-3, 0.0));
+        let g1 = robot.gravity_torque(&q1);
+
+        let (t, d) = c.process(&state(1, PlantStatus::SafeStop, &q1, state_flags::REFLEX), &wrench(1, [0.0; 3]));
+        assert_eq!(status(&t), Some(ControllerStatus::Starting));
+        assert_eq!(t.controller_status, 1, "the wire value of starting");
+        assert!((tau(&t) - g1).norm() < 1e-9 * g1.norm(), "{} vs g(q1) {g1}", tau(&t));
+        assert!((Vector3::from(d.pos_ref_task_m) - tcp_task(&s, &robot, &q1)).norm() < 1e-12);
+        let (t_running, _) = twin.process(&state(1, PlantStatus::Running, &q1, 0), &wrench(1, [0.0; 3]));
+        assert_eq!(status(&t_running), Some(ControllerStatus::Active));
+        assert!((tau(&t_running) - g1).norm() > 1.0, "running, the same pose is pulled back");
+
+        let (t2, _) = c.process(&state(2, PlantStatus::SafeStop, &q1, 0), &wrench(2, [0.0; 3]));
+        assert_eq!(status(&t2), Some(ControllerStatus::Active));
+    }
+
+    /// A safe stop during the approach (ticks k .. k+N−1, N periods longer than [`REENGAGE_S`]),
+    /// then running again. At the stop the references re-engage from the measured pose (zero
+    /// error); the plan's clock stands still through the stop while the re-engagement's offset
+    /// fades, so at its end the reference is the plan of tick k−1; back in running it moves on
+    /// from there: tick k+N answers as a controller that never stopped answers tick k.
+    #[test]
+    fn after_a_safe_stop_the_plan_goes_on_from_where_it_stood() {
+        let (s, mut c, robot, q0) = setup();
+        let mut twin = Controller::from_scenario(&s).with_id(7);
+        let (k, n) = (200u64, 400u64);
+        assert!(n as f64 * s.loop_.period_s > REENGAGE_S);
+        run(&mut c, 0..k, PlantStatus::Running, &q0, 0);
+        let plan = run(&mut twin, 0..k + n + 1, PlantStatus::Running, &q0, 0);
+        assert_eq!(c.reference().phase(), Phase::Approach);
+
+        let stop = run(&mut c, k..k + n, PlantStatus::SafeStop, &q0, 0);
+        assert!(Vector3::from(stop[0].1.pos_err_task_m).norm() < 1e-12, "re-engaged where the arm is");
+        // ... and as fast (at rest), at the approach's cruise (no acceleration): τ = g(q0).
+        let g0 = robot.gravity_torque(&q0);
+        assert!((tau(&stop[0].0) - g0).norm() < 1e-9 * g0.norm(), "{} vs g(q0) {g0}", tau(&stop[0].0));
+        let end = Vector3::from(stop[n as usize - 1].1.pos_ref_task_m);
+        assert!((end - Vector3::from(plan[k as usize - 1].1.pos_ref_task_m)).norm() < 1e-12, "{end:?}");
+        let (t, d) = c.process(&state(k + n, PlantStatus::Running, &q0, 0), &wrench(k + n, [0.0; 3]));
+        let (t_plan, d_plan) = plan[k as usize];
+        assert!((Vector3::from(d.pos_ref_task_m) - Vector3::from(d_plan.pos_ref_task_m)).norm() < 1e-12);
+        assert!((tau(&t) - tau(&t_plan)).norm() < 1e-9 * tau(&t_plan).norm(), "{} vs {}", tau(&t), tau(&t_plan));
+        // The plan moved meanwhile in the twin: the comparison can tell.
+        let moved = Vector3::from(plan[(k + n) as usize].1.pos_ref_task_m) - Vector3::from(d_plan.pos_ref_task_m);
+        assert!(moved.norm() > 1e-3, "{moved:?}");
+    }
+
+    /// The plant holds the last torque (HoldingTorque, ticks k .. k+N−1): the plan's clock stands
+    /// still, so each held tick answers as tick k−1 did (same state: same torque), and running
+    /// again, tick k+N answers as a controller that was never held answers tick k.
+    #[test]
+    fn while_the_plant_holds_the_plan_stands_still() {
+        let (s, mut c, _, q0) = setup();
+        let mut twin = Controller::from_scenario(&s).with_id(7);
+        let (k, n) = (200u64, 50u64);
+        run(&mut c, 0..k, PlantStatus::Running, &q0, 0);
+        let plan = run(&mut twin, 0..k + 1, PlantStatus::Running, &q0, 0);
+        let (t_before, d_before) = plan[k as usize - 1];
+        for (t, d) in run(&mut c, k..k + n, PlantStatus::HoldingTorque, &q0, 0) {
+            assert_eq!(status(&t), Some(ControllerStatus::Active));
+            assert!((Vector3::from(d.pos_ref_task_m) - Vector3::from(d_before.pos_ref_task_m)).norm() < 1e-12);
+            assert!((tau(&t) - tau(&t_before)).norm() < 1e-9 * tau(&t_before).norm(), "{} vs {}", tau(&t), tau(&t_before));
+        }
+        let (t, d) = c.process(&state(k + n, PlantStatus::Running, &q0, 0), &wrench(k + n, [0.0; 3]));
+        let (t_plan, d_plan) = plan[k as usize];
+        assert!((Vector3::from(d.pos_ref_task_m) - Vector3::from(d_plan.pos_ref_task_m)).norm() < 1e-12);
+        assert!((tau(&t) - tau(&t_plan)).norm() < 1e-9 * tau(&t_plan).norm());
+        // At 10 mm/s the approach moves 10 µm a tick: holding is visible.
+        assert!((Vector3::from(d_plan.pos_ref_task_m) - Vector3::from(d_before.pos_ref_task_m)).norm() > 5e-6);
+    }
+
+    /// The force integral runs only while the plant runs and the wheel is in contact: pressed
+    /// down into the force ramp, each running tick in contact adds (F_r − F_e) T (6.3), a held
+    /// tick or a tick out of contact adds nothing.
+    #[test]
+    fn the_force_integral_runs_only_while_running_in_contact() {
+        let (s, mut c, _, q0) = setup();
+        let period = s.loop_.period_s;
+        run(&mut c, 0..150, PlantStatus::Running, &q0, 0);
+        assert_eq!(c.reference().phase(), Phase::Approach);
+        // 2 N up on the tool (base z = task y): the strip is pressed with −2 N, then −1 N.
+        let contact = state_flags::IN_CONTACT;
+        let press = |c: &mut Controller, k: u64, st: PlantStatus, flags: u32, f: f64| {
+            c.process(&state(k, st, &q0, flags), &wrench(k, [0.0, 0.0, f]))
+        };
+        let mut k = 150;
+        while c.reference().phase() != Phase::ForceRamp {
+            press(&mut c, k, PlantStatus::Running, contact, 2.0);
+            k += 1;
+            assert!(k < 300, "never reached the force ramp");
+        }
+        let mut last = press(&mut c, k, PlantStatus::Running, contact, 1.0).1;
+        assert_eq!(last.force_control_active, 1);
+        let mut step = |c: &mut Controller, k: u64, st: PlantStatus, flags: u32| {
+            let d = press(c, k, st, flags, 1.0).1;
+            let di = d.force_integral_ns - last.force_integral_ns;
+            last = d;
+            (di, d)
+        };
+        for j in 1..=5 {
+            let (di, d) = step(&mut c, k + j, PlantStatus::Running, contact);
+            assert_eq!(d.force_meas_n, -1.0);
+            assert!(di.abs() > 1e-4, "running in contact: integrates ({di})");
+            assert!((di - (d.force_ref_n - d.force_meas_n) * period).abs() < 1e-15, "{di} vs (F_r − F_e) T");
+        }
+        assert_eq!(step(&mut c, k + 6, PlantStatus::HoldingTorque, contact).0, 0.0, "held: stands still");
+        assert_eq!(step(&mut c, k + 7, PlantStatus::Running, 0).0, 0.0, "out of contact: stands still");
+        assert!(step(&mut c, k + 8, PlantStatus::Running, contact).0.abs() > 1e-4, "and runs again");
+    }
+
+    /// A state the law cannot answer (a NaN joint angle, or a NaN in the wrench) gives a
+    /// non-finite torque marked Fault (2 on the wire), which the plant refuses; Fault goes before
+    /// a reflex acknowledgement.
+    #[test]
+    fn a_non_finite_torque_is_marked_fault() {
+        let (s, mut c, _, q0) = setup();
+        run(&mut c, 0..1, PlantStatus::Running, &q0, 0);
+        let mut q = q0;
+        q[2] = f64::NAN;
+        let (t, _) = c.process(&state(1, PlantStatus::Running, &q, 0), &wrench(1, [0.0; 3]));
+        assert_eq!((status(&t), t.controller_status), (Some(ControllerStatus::Fault), 2));
+        assert!(tau(&t).iter().any(|x| !x.is_finite()));
+
+        let mut c = Controller::from_scenario(&s);
+        run(&mut c, 0..1, PlantStatus::Running, &q0, 0);
+        let (t, _) = c.process(&state(1, PlantStatus::SafeStop, &q0, state_flags::REFLEX), &wrench(1, [f64::NAN, 0.0, 0.0]));
+        assert_eq!(status(&t), Some(ControllerStatus::Fault));
+        // The same tick with a finite wrench is acknowledged.
+        let mut c = Controller::from_scenario(&s);
+        run(&mut c, 0..1, PlantStatus::Running, &q0, 0);
+        let (t, _) = c.process(&state(1, PlantStatus::SafeStop, &q0, state_flags::REFLEX), &wrench(1, [0.0; 3]));
+        assert_eq!(status(&t), Some(ControllerStatus::Starting));
     }
 }

@@ -10,7 +10,7 @@ use std::time::Instant;
 use anyhow::Context;
 use plant_sim::physics::Physics;
 use plant_sim::recording::{EventKind, EventRecord};
-use plant_sim::run::{nominal_duration_s, open_recorder_with, RecordingAbout, RunSummary};
+use plant_sim::run::{open_recorder_with, run_length, RecordingAbout, RunSummary};
 use plant_sim::stats::LoopStats;
 use plant_sim::PlantTick;
 use recordings::TimingRecord;
@@ -41,9 +41,7 @@ pub fn run(
     let s = Scenario::load(scenario_path)?;
     anyhow::ensure!(!s.egm.enabled, "--in-process: {} enables [egm]; the EGM path runs with its daemons only", scenario_path.display());
     let text = std::fs::read_to_string(scenario_path).with_context(|| format!("reading {}", scenario_path.display()))?;
-    let l = &s.loop_;
-    let duration_s = duration_s.or((l.duration_s > 0.0).then_some(l.duration_s)).unwrap_or_else(|| nominal_duration_s(&s));
-    let n_ticks = (duration_s / l.period_s).round() as u64;
+    let n_ticks = run_length(&s, duration_s)?.n_ticks;
     let physics = physics(&s)?;
     let path = s.recording.enabled.then(|| recording.to_path_buf());
     let mut recorder = match &path {

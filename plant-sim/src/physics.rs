@@ -36,20 +36,9 @@ pub fn substep_s(s: &Scenario) -> f64 {
     s.loop_.period_s / s.loop_.substeps as f64
 }
 
-/// The plant robot of a scenario: arm + tool ([`geometry::tool`], as the controller's), armature and viscous friction from `[robot]`, every
-/// mass and inertia scaled by `robot.plant_inertia_scale` (plant/controller mismatch studies).
-pub fn plant_robot(s: &Scenario) -> Robot {
-    let robot = Robot::irb2400_with_tool(geometry::tool(s))
-        .with_armature(Vec6::from(s.robot.armature_kgm2))
-        .with_viscous(Vec6::from(s.robot.viscous_nms))
-        .scaled_inertia(s.robot.plant_inertia_scale);
-    // `[mismatch]`: the plant's links against the controller's model, per link.
-    if s.mismatch.link_inertia_scale == [1.0; 6] {
-        robot
-    } else {
-        robot.scaled_links(&s.mismatch.link_inertia_scale)
-    }
-}
+/// The plant robot of a scenario, built where the controller's is ([`geometry::plant_robot`]):
+/// the shared model with the plant's inertia mismatch on top.
+pub use scenarios::geometry::plant_robot;
 
 /// The contact tables of a scenario's strip at the reference bump and its substep (None without
 /// the strip): from the on-disk cache beside the strip model (`table_cache`), else built from the

@@ -45,6 +45,33 @@ pub fn nominal_duration_s(s: &Scenario) -> f64 {
     t.settle_s + approach + t.force_ramp_s + t.dwell_s + t.roll_s + t.ramp_down_s + t.lift_s + 0.2
 }
 
+/// How long a run lasts: its simulated seconds and the whole control ticks they round to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunLength {
+    /// Simulated time, s.
+    pub duration_s: f64,
+    /// Ticks of `loop.period_s`: round(duration_s / period_s).
+    pub n_ticks: u64,
+}
+
+/// A run length that is not a positive, finite time.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("duration {0} s must be positive")]
+pub struct RunLengthError(pub f64);
+
+/// The run-length rule of every driver (the `plant-sim` daemon, `rig run --in-process`, `rig
+/// sweep`'s cases): `duration_s` when given (the command line), else the scenario's
+/// `loop.duration_s` when it is positive, else [`nominal_duration_s`]; the ticks are the nearest
+/// whole number of `loop.period_s` (a run never ends mid-tick).
+pub fn run_length(s: &Scenario, duration_s: Option<f64>) -> Result<RunLength, RunLengthError> {
+    let l = &s.loop_;
+    let duration_s = duration_s.or((l.duration_s > 0.0).then_some(l.duration_s)).unwrap_or_else(|| nominal_duration_s(s));
+    if !(duration_s.is_finite() && duration_s > 0.0) {
+        return Err(RunLengthError(duration_s));
+    }
+    Ok(RunLength { duration_s, n_ticks: (duration_s / l.period_s).round() as u64 })
+}
+
 /// Default recording path of a rig.
 pub fn default_recording_path(rig: &str) -> PathBuf {
     let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
@@ -214,15 +241,14 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         std::fs::read_to_string(&opts.scenario_path).with_context(|| format!("reading {}", opts.scenario_path.display()))?;
     let mode = opts.mode.unwrap_or(scenario.loop_.mode);
     let l = &scenario.loop_;
-    let duration_s = opts.duration_s.or((l.duration_s > 0.0).then_some(l.duration_s)).unwrap_or_else(|| nominal_duration_s(&scenario));
-    anyhow::ensure!(duration_s.is_finite() && duration_s > 0.0, "duration {duration_s} s must be positive");
+    let length = run_length(&scenario, opts.duration_s)?;
     let period_ns = (l.period_s * 1e9).round() as u64;
     let params = LoopParams {
         mode,
         period_ns,
         budget_ns: (l.torque_budget_us * 1e3).round() as u64,
         watchdog_ns: (l.lockstep_watchdog_s * 1e9).round() as u64,
-        n_ticks: (duration_s / l.period_s).round() as u64,
+        n_ticks: length.n_ticks,
         spin_ns: if mode == Mode::Realtime { (l.spin_wait_us * 1e3).round() as u64 } else { 0 },
     };
 
@@ -442,5 +468,54 @@ fn scene_config(
         tool: scenarios::geometry::tool(s),
         task_in_base: scenarios::geometry::TaskFrame::from_scenario(s).pose_in_base(),
         strip,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The default scenario sets no length: its nominal trajectory, settle 0.1 + approach
+    /// 3 mm / 10 mm/s + ramp 0.3 + dwell 0.2 + roll 2.0 + ramp down 0.2 + lift 0.3 + 0.2 = 3.6 s,
+    /// 3600 ticks of 1 ms.
+    #[test]
+    fn without_a_length_the_run_is_the_nominal_trajectory() {
+        let s = Scenario::default();
+        let r = run_length(&s, None).unwrap();
+        assert!((r.duration_s - 3.6).abs() < 1e-12, "{}", r.duration_s);
+        assert_eq!(r.n_ticks, 3600);
+        // No approach speed: no approach term (3.3 s).
+        let mut s = Scenario::default();
+        s.trajectory.approach_speed_mm_s = 0.0;
+        assert_eq!(run_length(&s, None).unwrap().n_ticks, 3300);
+    }
+
+    /// The command line before the scenario's `loop.duration_s`, that before the nominal.
+    #[test]
+    fn the_command_line_wins_over_the_scenario_and_the_scenario_over_the_nominal() {
+        let mut s = Scenario::default();
+        s.loop_.duration_s = 1.5;
+        assert_eq!(run_length(&s, None).unwrap(), RunLength { duration_s: 1.5, n_ticks: 1500 });
+        assert_eq!(run_length(&s, Some(0.25)).unwrap(), RunLength { duration_s: 0.25, n_ticks: 250 });
+    }
+
+    /// Ticks are the nearest whole number of periods: 2 ms periods, 5.1 ms → 2.55 → 3 ticks,
+    /// 4.9 ms → 2.45 → 2 ticks.
+    #[test]
+    fn ticks_round_to_the_nearest_period() {
+        let mut s = Scenario::default();
+        s.loop_.period_s = 2e-3;
+        assert_eq!(run_length(&s, Some(5.1e-3)).unwrap().n_ticks, 3);
+        assert_eq!(run_length(&s, Some(4.9e-3)).unwrap().n_ticks, 2);
+        assert_eq!(run_length(&s, None).unwrap().n_ticks, 1800);
+    }
+
+    #[test]
+    fn a_length_that_is_not_a_positive_finite_time_is_refused() {
+        let s = Scenario::default();
+        for d in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let e = run_length(&s, Some(d)).unwrap_err();
+            assert_eq!(e.to_string(), format!("duration {d} s must be positive"));
+        }
     }
 }

@@ -561,11 +561,7 @@ pub struct RigModel {
 impl RigModel {
     /// The model of scenario `s`.
     pub fn from_scenario(s: &scenarios::Scenario) -> RigModel {
-        RigModel {
-            robot: robot::Robot::irb2400_with_tool(scenarios::geometry::tool(s))
-                .with_armature(Vec6::from(s.robot.armature_kgm2))
-                .with_viscous(Vec6::from(s.robot.viscous_nms)),
-        }
+        RigModel { robot: scenarios::geometry::nominal_robot(s) }
     }
 }
 

@@ -1,12 +1,13 @@
 //! The rig's geometry as a scenario places it (DESIGN section 3), in one place: the strip's
-//! height, the task frame, the tool, the tool-down orientation and the start pose. The plant,
-//! the controller, the recorder's scene and the design tools all take them from here, so the two
-//! sides of the rig cannot disagree about where the strip lies or what the TCP is.
+//! height, the task frame, the tool, the robot models built with it, the tool-down orientation and
+//! the start pose. The plant, the controller, the recorder's scene and the design tools all take
+//! them from here, so the two sides of the rig cannot disagree about where the strip lies, what
+//! the TCP is or what arm they move (the plant's mismatch is applied on top of the shared model).
 //!
 //! Frames and signs: messages/README.md, "Frames and signs".
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
-use robot::Tool;
+use robot::{Robot, Tool, Vec6};
 
 use crate::Scenario;
 
@@ -91,6 +92,37 @@ pub fn controller_tool(s: &Scenario) -> Tool {
     t
 }
 
+/// The scenario's arm carrying `tool`, with `[robot]`'s armature and viscous friction: the one
+/// construction every model of the rig starts from ([`nominal_robot`], [`controller_robot`],
+/// [`plant_robot`]).
+pub fn robot_with_tool(s: &Scenario, tool: Tool) -> Robot {
+    Robot::irb2400_with_tool(tool).with_armature(Vec6::from(s.robot.armature_kgm2)).with_viscous(Vec6::from(s.robot.viscous_nms))
+}
+
+/// The arm as the scenario describes it, with its true [`tool`] and no mismatch of any side: the
+/// EGM servo's model (the robot controller of a real cell knows its arm, not the plant's errors).
+pub fn nominal_robot(s: &Scenario) -> Robot {
+    robot_with_tool(s, tool(s))
+}
+
+/// The force controller's robot model: the arm with the tool it believes ([`controller_tool`]),
+/// deliberately WITHOUT `robot.plant_inertia_scale` and `[mismatch] link_inertia_scale` (the
+/// plant's side of the mismatch, like `[drives]`).
+pub fn controller_robot(s: &Scenario) -> Robot {
+    robot_with_tool(s, controller_tool(s))
+}
+
+/// The plant's robot: [`nominal_robot`] with the plant's mismatch on top, every mass and inertia
+/// scaled by `robot.plant_inertia_scale`, then each link's by `[mismatch] link_inertia_scale`.
+pub fn plant_robot(s: &Scenario) -> Robot {
+    let robot = nominal_robot(s).scaled_inertia(s.robot.plant_inertia_scale);
+    if s.mismatch.link_inertia_scale == [1.0; 6] {
+        robot
+    } else {
+        robot.scaled_links(&s.mismatch.link_inertia_scale)
+    }
+}
+
 /// Tool orientation of the whole run, base frame: pointing straight down, wheel axis across the
 /// strip ([`robot::tool_down_pose`]'s rotation by π about base x).
 pub fn tool_down_rotation() -> Matrix3<f64> {
@@ -122,6 +154,7 @@ pub fn start_tcp_pose(s: &Scenario) -> Isometry3<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Matrix6;
 
     #[test]
     fn task_frame_is_a_proper_rotation_and_round_trips() {
@@ -134,6 +167,33 @@ mod tests {
         assert!((b - Vector3::new(0.90, 0.0, 0.71)).norm() < 1e-12, "{b}");
         let pose = f.pose_in_base();
         assert!((pose * nalgebra::Point3::from(p)).coords.metric_distance(&f.point_to_base(&p)) < 1e-15);
+    }
+
+    /// The three models are one construction with each side's mismatch on top: without
+    /// mismatch they are the same arm; `robot.plant_inertia_scale` moves only the plant's mass,
+    /// `mismatch.tool_mass_error` only the controller's tool; armature sits on M's diagonal.
+    #[test]
+    fn plant_and_controller_models_differ_by_their_own_mismatch_only() {
+        let mut s = Scenario::default();
+        let q = Vec6::new(0.1, -1.2, 0.3, 0.2, -0.4, 0.5);
+        let m0 = nominal_robot(&s).total_mass_kg();
+        let g0 = nominal_robot(&s).gravity_torque(&q);
+        assert_eq!(controller_robot(&s).gravity_torque(&q), g0);
+        assert_eq!(plant_robot(&s).gravity_torque(&q), g0);
+        s.robot.armature_kgm2 = [0.5, 0.4, 0.3, 0.02, 0.02, 0.01];
+        let armature = Vec6::from(s.robot.armature_kgm2);
+        let bare = Robot::irb2400_with_tool(tool(&s)).mass_matrix(&q);
+        assert!((nominal_robot(&s).mass_matrix(&q) - bare - Matrix6::from_diagonal(&armature)).norm() < 1e-12);
+
+        s.robot.plant_inertia_scale = 1.1;
+        s.mismatch.tool_mass_error = 0.2;
+        assert_eq!(nominal_robot(&s).total_mass_kg(), m0);
+        assert!((plant_robot(&s).total_mass_kg() - 1.1 * m0).abs() < 1e-12 * m0);
+        let want = m0 + 0.2 * s.robot.tool_mass_kg;
+        assert!((controller_robot(&s).total_mass_kg() - want).abs() < 1e-12 * m0, "{} vs {want}", controller_robot(&s).total_mass_kg());
+        s.mismatch.link_inertia_scale[1] = 1.5;
+        assert!(plant_robot(&s).total_mass_kg() > 1.1 * m0 + 1.0, "the link's scale comes on top");
+        assert!((controller_robot(&s).total_mass_kg() - want).abs() < 1e-12 * m0);
     }
 
     #[test]

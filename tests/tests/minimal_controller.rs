@@ -77,9 +77,7 @@ fn minimal_controller_answers_every_tick_and_holds_the_arm_then_exits_0_on_the_g
     // arm up: it coasts at most |qd| N T. After the blend u stays put and the critically damped
     // PD (omega = 2 pi 10 rad/s, the script's gains) stops it within a further |qd|/(omega e).
     let s = scenarios::Scenario::load(&t.scenario).unwrap();
-    let robot = robot::Robot::irb2400_with_tool(scenarios::geometry::tool(&s))
-        .with_armature(Vec6::from(s.robot.armature_kgm2))
-        .with_viscous(Vec6::from(s.robot.viscous_nms));
+    let robot = scenarios::geometry::nominal_robot(&s);
     let q0 = Vec6::from(s0.q);
     let g = robot.gravity_torque(&q0);
     let (period, n_blend) = (s.loop_.period_s, (s.loop_.takeover_blend_s / s.loop_.period_s).round());

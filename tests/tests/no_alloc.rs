@@ -79,7 +79,7 @@ fn servo_run_allocates_nothing(name: &str, ticks: Option<u64>) {
     let s = Scenario::load(&path).unwrap();
     let mut plant = PlantTick::from_scenario(&s, &strip::cache::cache_dir(), Mode::Lockstep).unwrap();
     let mut controller = Controller::from_scenario(&s).with_id(1);
-    let n_ticks = ticks.unwrap_or((plant_sim::run::nominal_duration_s(&s) / s.loop_.period_s).round() as u64);
+    let n_ticks = ticks.unwrap_or_else(|| plant_sim::run::run_length(&s, None).unwrap().n_ticks);
     let (mut plant_allocations, mut controller_allocations) = (0, 0);
     let (mut counted, mut in_contact) = (0, 0);
     while plant.tick() < n_ticks {

@@ -48,9 +48,7 @@ fn python_controller_holds_the_arm_in_lockstep_with_gravity_equal_to_the_rust_mo
     // must equal the Rust `robot` crate's gravity torque of the plant's tool-equipped arm.
     assert_eq!(rec.joint_state[0].qd, [0.0; 6], "the plant starts at rest");
     let s = scenarios::Scenario::load(&t.scenario).unwrap();
-    let robot = robot::Robot::irb2400_with_tool(scenarios::geometry::tool(&s))
-        .with_armature(Vec6::from(s.robot.armature_kgm2))
-        .with_viscous(Vec6::from(s.robot.viscous_nms));
+    let robot = scenarios::geometry::nominal_robot(&s);
     let g = robot.gravity_torque(&q0);
     let first = rec.joint_torque.iter().find(|r| r.tick == 0).and_then(|r| r.commanded).expect("tick 0 answer recorded");
     let rel = (Vec6::from(first) - g).norm() / g.norm();

@@ -90,14 +90,6 @@ impl EgmParams {
     }
 }
 
-/// The servo's model: the scenario's arm and tool, armature and friction, without the plant's
-/// inertia mismatch (`robot.plant_inertia_scale`).
-pub fn servo_model(s: &Scenario) -> Robot {
-    Robot::irb2400_with_tool(scenarios::geometry::tool(s))
-        .with_armature(Vec6::from(s.robot.armature_kgm2))
-        .with_viscous(Vec6::from(s.robot.viscous_nms))
-}
-
 /// The EGM robot controller and its plant.
 pub struct EgmLoop<'a> {
     /// The plant's tick core, driven by the servo's torques.
@@ -157,7 +149,7 @@ impl<'a> EgmLoop<'a> {
         let sock = UdpSocket::bind(bind).map_err(|e| anyhow::anyhow!("binding the EGM robot's UDP socket: {e}"))?;
         sock.set_nonblocking(true)?;
         let q0 = plant.physics().q();
-        let servo = Servo::new(ServoParams::from_scenario(s), servo_model(s), q0);
+        let servo = Servo::new(ServoParams::from_scenario(s), scenarios::geometry::nominal_robot(s), q0);
         let robot_msg = pb::EgmRobot {
             header: Some(pb::EgmHeader::default()),
             feed_back: Some(pb::EgmFeedBack {

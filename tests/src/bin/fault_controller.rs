@@ -130,10 +130,7 @@ struct Drive {
 
 fn run(a: &Args) -> anyhow::Result<u64> {
     let s = scenarios::Scenario::load(&a.scenario)?;
-    let tool = robot::Tool::wheel_on_bracket(s.robot.tool_mass_kg, s.robot.tool_offset_m, s.robot.wheel_radius_mm * 1e-3);
-    let robot = robot::Robot::irb2400_with_tool(tool)
-        .with_armature(Vec6::from(s.robot.armature_kgm2))
-        .with_viscous(Vec6::from(s.robot.viscous_nms));
+    let robot = scenarios::geometry::nominal_robot(&s);
     let period = s.loop_.period_s;
     let stall = Duration::from_secs_f64(s.loop_.peer_stall_timeout_s);
     messages::ports::clean_dead_nodes();

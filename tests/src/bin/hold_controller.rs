@@ -181,9 +181,7 @@ fn main() {
 
 fn run(a: &Args) -> anyhow::Result<()> {
     let s = scenarios::Scenario::load(&a.scenario)?;
-    let robot = robot::Robot::irb2400_with_tool(scenarios::geometry::tool(&s))
-        .with_armature(Vec6::from(s.robot.armature_kgm2))
-        .with_viscous(Vec6::from(s.robot.viscous_nms));
+    let robot = scenarios::geometry::nominal_robot(&s);
     std::thread::sleep(Duration::from_secs_f64(a.sleep_before_open_s));
     if a.iceoryx2_defaults {
         return defaults_only(&a.rig);
