@@ -4,7 +4,7 @@
 //!
 //! The binaries must be built first: `cargo build --release --workspace --bins`.
 
-use messages::child::{self, SpawnOptions};
+use rig_process::child::{self, SpawnOptions};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus};
@@ -426,6 +426,34 @@ pub fn client_examples() -> &'static ClientExamples {
     })
 }
 
+/// A UDP port free right now (the sensor binds it next).
+pub fn free_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// Wait until someone holds UDP `port` on loopback (the EGM sensor, Python client or
+/// `egm-controller`, has bound it).
+pub fn wait_bound(port: u16, client: &mut Daemon) {
+    let end = Instant::now() + Duration::from_secs(30);
+    while std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok() {
+        assert!(
+            Instant::now() < end && client.wait_timeout(Duration::from_millis(0)).is_none(),
+            "the EGM client never bound port {port}: {}",
+            client.stderr()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// `scenarios/egm.toml` with the sensor on `port`, written into `dir`.
+pub fn egm_scenario_on(dir: &Path, port: u16) -> PathBuf {
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/egm.toml")).unwrap();
+    assert!(text.contains("sensor_address = \"127.0.0.1:6510\""));
+    let p = dir.join("egm.toml");
+    std::fs::write(&p, text.replace("127.0.0.1:6510", &format!("127.0.0.1:{port}"))).unwrap();
+    p
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -451,34 +479,4 @@ mod tests {
         at(&new_src, 3_000);
         assert_eq!(source_newer_than(&exe, &dep), Some(new_src));
     }
-}
-
-/// A UDP port free right now (the sensor binds it next).
-pub fn free_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
-
-/// Wait until someone holds UDP `port` on loopback (the EGM sensor, Python client or
-/// `egm-controller`, has bound it).
-pub fn wait_bound(port: u16, client: &mut Daemon) {
-    let end = Instant::now() + Duration::from_secs(30);
-    while std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok() {
-        assert!(
-            Instant::now() < end && client.wait_timeout(Duration::from_millis(0)).is_none(),
-            "the EGM client never bound port {port}: {}",
-            client.stderr()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-
-/// `scenarios/egm.toml` with the sensor on `port`, written into `dir`.
-pub fn egm_scenario_on(dir: &Path, port: u16) -> PathBuf {
-    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/egm.toml")).unwrap();
-    assert!(text.contains("sensor_address = \"127.0.0.1:6510\""));
-    let p = dir.join("egm.toml");
-    std::fs::write(&p, text.replace("127.0.0.1:6510", &format!("127.0.0.1:{port}"))).unwrap();
-    p
 }
