@@ -94,7 +94,6 @@ fn install_stop_handlers() {
     }
 }
 
-
 extern "C" fn on_controller_ended(_sig: libc::c_int, info: *mut libc::siginfo_t, _ctx: *mut libc::c_void) {
     // SAFETY: the kernel passes a valid siginfo_t to an SA_SIGINFO handler; reading it and storing
     // to an atomic is async-signal-safe.
@@ -122,7 +121,7 @@ pub enum ControllerEnd {
     Signal(i32),
     Unknown,
     /// The process (`pid`) is alive but answered no state within the connect timeout; `rig`
-    /// stops it. `seen`: what `rig` saw of it (`messages::connect::NotConnected::code`).
+    /// stops it. `seen`: what `rig` saw of it (`rig_process::connect::NotConnected::code`).
     NeverConnected {
         pid: u32,
         seen: u8,
@@ -138,7 +137,7 @@ impl std::fmt::Display for ControllerEnd {
             ControllerEnd::NeverConnected { pid, seen } => write!(
                 f,
                 "never connected: process {pid} answered no state within loop.connect_timeout_s ({}); rig stops it",
-                messages::connect::NotConnected::what(*seen)
+                rig_process::connect::NotConnected::what(*seen)
             ),
         }
     }
@@ -158,8 +157,6 @@ pub fn encode_controller_end(end: ControllerEnd) -> i32 {
     }
 }
 
-
-
 /// The report of a sigqueue value ([`encode_controller_end`]); 0 is none.
 pub fn decode_controller_end(v: i32) -> Option<ControllerEnd> {
     match v {
@@ -173,9 +170,6 @@ pub fn decode_controller_end(v: i32) -> Option<ControllerEnd> {
         v => Some(ControllerEnd::Signal(-v)),
     }
 }
-
-
-
 
 #[cfg(test)]
 mod controller_end_tests {

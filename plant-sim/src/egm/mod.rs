@@ -43,12 +43,12 @@ use scenarios::{Mode, Scenario};
 
 use crate::pacer::Pacer;
 use crate::recording::{EgmRecord, EventKind, EventRecord, Recorder, TimingRecord};
-use crate::rt;
-use crate::stack_text::StackText;
 use crate::signals::Signals;
+use crate::stack_text::StackText;
 use crate::stats::LoopStats;
 use crate::tick::PlantTick;
 use crate::tick_events::{EventHandOn, PlantEvent};
+use rig_process::clock;
 use servo::{Servo, ServoParams};
 use session::{Refusal, Rules, SensorBuffer};
 
@@ -189,7 +189,7 @@ impl<'a> EgmLoop<'a> {
             out: Vec::with_capacity(2048),
             state: SessionState::Waiting,
             robot_seqno: 0,
-            start_wall_ns: rt::now_wall_ns(),
+            start_wall_ns: clock::now_wall_ns(),
         })
     }
 
@@ -300,7 +300,7 @@ impl EgmLoop<'_> {
         let mut es = EgmStats::default();
         let mut buf = [0u8; 2048];
         let mut hand_on = EventHandOn::new(p.period_ns);
-        let origin_ns = rt::now_mono_ns();
+        let origin_ns = clock::now_mono_ns();
         let mut pacer = Pacer::new(origin_ns, p.period_ns);
         let mut last_valid_ns = origin_ns;
         let mut refusing = false;
@@ -316,8 +316,8 @@ impl EgmLoop<'_> {
             if p.mode == Mode::Realtime {
                 pacer.pace(tick, &mut stats, self.recorder.as_deref_mut());
             }
-            let wake_ns = rt::now_mono_ns();
-            let publish_wall_ns = rt::now_wall_ns();
+            let wake_ns = clock::now_mono_ns();
+            let publish_wall_ns = clock::now_wall_ns();
             let cycle_tick = tick.is_multiple_of(p.cycle_ticks);
             let mut latency_ns = 0u64;
             let mut answered = false;
@@ -325,7 +325,7 @@ impl EgmLoop<'_> {
             if cycle_tick && self.state != SessionState::Stopped {
                 es.cycles += 1;
                 self.send_robot(tick);
-                last_sent_ns = rt::now_mono_ns();
+                last_sent_ns = clock::now_mono_ns();
                 if p.mode == Mode::Lockstep {
                     if self.state == SessionState::Waiting {
                         while !self.signals.stop_requested() && !self.wait_readable(LOCKSTEP_RESEND) {
@@ -361,7 +361,7 @@ impl EgmLoop<'_> {
                         cycle.joints_ref_deg = a.joints_deg;
                         cycle.speed_ref_deg_s = a.speed_deg_s;
                         refusing = false;
-                        last_valid_ns = rt::now_mono_ns();
+                        last_valid_ns = clock::now_mono_ns();
                         self.servo.set_reference(a.q_ref, a.qd_ref);
                         if self.state == SessionState::Waiting {
                             self.state = SessionState::Running;
@@ -388,7 +388,7 @@ impl EgmLoop<'_> {
             // Reply latency: from this cycle's EgmRobot to the reply taken (real time: at the tick
             // the reply was found, so to within a tick).
             if answered {
-                latency_ns = rt::now_mono_ns() - last_sent_ns;
+                latency_ns = clock::now_mono_ns() - last_sent_ns;
                 stats.round_trip.record(latency_ns);
             }
             // /egm: one row per cycle, written at its end (lockstep: the reply came at its start).
@@ -412,7 +412,7 @@ impl EgmLoop<'_> {
                 }
             }
             // 3. Session timeout: no valid sensor message for comm_timeout (wall clock).
-            if self.state == SessionState::Running && rt::now_mono_ns().saturating_sub(last_valid_ns) > p.comm_timeout_ns {
+            if self.state == SessionState::Running && clock::now_mono_ns().saturating_sub(last_valid_ns) > p.comm_timeout_ns {
                 let mut s = StackText::new();
                 let _ = write!(
                     s,
@@ -431,8 +431,8 @@ impl EgmLoop<'_> {
             } as u32;
             let tau = self.servo.tick(&Vec6::from(state.q), &Vec6::from(state.qd));
             let tau = Vec6::from_fn(|i, _| tau[i].clamp(-Robot::TORQUE_LIMIT_NM[i], Robot::TORQUE_LIMIT_NM[i]));
-            let pre_ns = rt::now_mono_ns() - wake_ns;
-            let t0 = rt::now_mono_ns();
+            let pre_ns = clock::now_mono_ns() - wake_ns;
+            let t0 = clock::now_mono_ns();
             let outcome = self.plant.advance_servo(&tau);
             // 5. The tick's events; a reflex ends the session (the robot's motion supervision
             //    stops it).
@@ -451,11 +451,11 @@ impl EgmLoop<'_> {
                 }
             }
             // 6. Record.
-            let plant_ns = pre_ns + (rt::now_mono_ns() - t0);
+            let plant_ns = pre_ns + (clock::now_mono_ns() - t0);
             stats.plant_compute.record(plant_ns);
             let timing = TimingRecord {
                 publish_wall_ns,
-                torque_receive_wall_ns: if answered { rt::now_wall_ns() } else { 0 },
+                torque_receive_wall_ns: if answered { clock::now_wall_ns() } else { 0 },
                 round_trip_ns: if answered { latency_ns } else { 0 },
                 period_ns: p.period_ns,
                 missed: false,
@@ -478,10 +478,10 @@ impl EgmLoop<'_> {
         }
         stats.ticks = tick;
         stats.refusals = es.refused;
-        stats.wall_s = (rt::now_mono_ns() - origin_ns) as f64 * 1e-9;
+        stats.wall_s = (clock::now_mono_ns() - origin_ns) as f64 * 1e-9;
         stats.sim_s = self.plant.physics().time_s();
         if let Some((t0, k0)) = first_answer {
-            stats.active_wall_s = (rt::now_mono_ns() - t0) as f64 * 1e-9;
+            stats.active_wall_s = (clock::now_mono_ns() - t0) as f64 * 1e-9;
             stats.active_sim_s = (tick - k0) as f64 * p.period_ns as f64 * 1e-9;
         }
         let mut s = StackText::new();
