@@ -12,9 +12,9 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use messages::ports::{ControllerPorts, Wake};
 use messages::{check_version, state_flags, JointState, PlantStatus, Wrench, WrenchFrame};
 use nalgebra::Vector3;
+use rig_process::ports::{ControllerPorts, Wake};
 use robot::Vec6;
 use scenarios::Scenario;
 
@@ -65,35 +65,25 @@ pub struct DaemonSummary {
     pub mean_compute_ns: f64,
 }
 
-/// Timer slack 1 ns, SCHED_FIFO (priority > 0) and mlockall when permitted; each outcome logged once.
+/// Timer slack 1 ns, SCHED_FIFO (priority > 0) and mlockall when permitted
+/// ([`rig_process::rt::setup_thread`], the plant's set-up); each outcome logged once.
 fn setup_realtime(priority: i32) {
-    // SAFETY: plain syscalls on the calling thread/process with valid arguments.
-    let (slack, fifo, lock) = unsafe {
-        let slack = libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) == 0;
-        let fifo = if priority > 0 {
-            let param = libc::sched_param { sched_priority: priority };
-            libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param)
-        } else {
-            -1
-        };
-        let lock = libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0;
-        (slack, fifo, lock)
-    };
-    if !slack {
+    let r = rig_process::rt::setup_thread((priority > 0).then_some(priority));
+    if !r.timer_slack_1ns {
         tracing::warn!("could not lower the timer slack to 1 ns");
     }
-    if fifo == 0 {
+    if r.sched_fifo {
         tracing::info!(priority, "SCHED_FIFO enabled");
-    } else if fifo < 0 {
+    } else if priority <= 0 {
         tracing::info!("SCHED_FIFO not requested (--rt-priority 0): default scheduler");
     } else {
         tracing::warn!(
             priority,
-            error = %std::io::Error::from_raw_os_error(fifo),
+            error = %std::io::Error::from_raw_os_error(r.sched_fifo_errno),
             "SCHED_FIFO not permitted (needs CAP_SYS_NICE or an rtprio limit); running with the default scheduler"
         );
     }
-    if !lock {
+    if !r.mlockall {
         tracing::warn!("mlockall not permitted (memlock limit); pages may fault on the first ticks");
     }
 }
@@ -134,11 +124,11 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     let mut summary = DaemonSummary::default();
     let mut compute_sum_ns: u128 = 0;
 
-    // Silence after which the plant is asked about: dead (its node, see messages::liveness) ends
+    // Silence after which the plant is asked about: dead (its node, see rig_process::liveness) ends
     // the run at once; alive but silent (a stalled host, SIGSTOP) is waited for up to
     // `loop.peer_stall_timeout_s`. In lockstep the plant may legitimately be slow (a loaded
     // machine): its own torque watchdog is the first measure there.
-    let watch = messages::liveness::PeerWatch::spawn(&cfg.rig, "controller-watch", messages::liveness::Watched::Plant)
+    let watch = rig_process::liveness::PeerWatch::spawn(&cfg.rig, "controller-watch", rig_process::liveness::Watched::Plant)
         .with_context(|| format!("controller for rig {:?}", cfg.rig))?;
     let stall_timeout = Duration::from_secs_f64(s.loop_.peer_stall_timeout_s).max(cfg.dead_plant_timeout);
     let lockstep_silence = cfg.dead_plant_timeout.max(Duration::from_secs_f64(s.loop_.lockstep_watchdog_s));
@@ -150,13 +140,13 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     let mut stall_logged = false;
     loop {
         let deadline = match last_state_at {
-            Some(t) if stall_logged => (t + stall_timeout).min(Instant::now() + messages::liveness::WATCH_PERIOD),
+            Some(t) if stall_logged => (t + stall_timeout).min(Instant::now() + rig_process::liveness::WATCH_PERIOD),
             Some(t) => t + silence,
             None => started + cfg.startup_timeout,
         };
         let wake = ports.wait_state_spinning(next_due.map(|due| (due, cfg.state_spin)), deadline);
         let woke = Instant::now();
-        let woke_mono_ns = messages::monotonic_ns();
+        let woke_mono_ns = rig_process::clock::now_mono_ns();
         let received = if wake == Wake::Timeout {
             // A notification may have been consumed while we computed: one last look.
             match ports.receive_state_with_origin() {
@@ -264,12 +254,12 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
         }
         let first = controller.is_first();
         let (torque, mut diag) = controller.process(&state, &wrench);
-        diag.computed_mono_ns = messages::monotonic_ns();
+        diag.computed_mono_ns = rig_process::clock::now_mono_ns();
         let compute_ns = woke.elapsed().as_nanos() as u64;
         diag.compute_time_ns = compute_ns;
         diag.woke_mono_ns = woke_mono_ns;
         // The stage stamps (messages README, ControllerDiagnostics): handed over now.
-        diag.published_mono_ns = messages::monotonic_ns();
+        diag.published_mono_ns = rig_process::clock::now_mono_ns();
         ports.publish(&torque, Some(&diag)).with_context(|| format!("rig {:?}: publish torque of tick {}", cfg.rig, state.tick))?;
         last_tick = Some(state.tick);
         summary.ticks_answered += 1;

@@ -24,20 +24,20 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    messages::logging::init_stderr();
-    messages::host::exit_on_sigbus("controller");
+    rig_process::logging::init_stderr();
+    rig_process::host::exit_on_sigbus("controller");
     let args = Args::parse();
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             // A host problem is said once, below; other errors also go to the log.
-            if e.downcast_ref::<messages::host::HostError>().is_none() {
+            if e.downcast_ref::<rig_process::host::HostError>().is_none() {
                 tracing::error!("{e:#}");
             }
             // Tolerates a closed stderr (a launcher that died).
-            messages::host::print_stderr(&format!("controller: error: {e:#}\n"));
-            // Shared memory unusable has its own status (71, `messages::host`), other errors 1.
-            let code = e.downcast_ref::<messages::host::HostError>().map_or(1, messages::host::HostError::exit_code);
+            rig_process::host::print_stderr(&format!("controller: error: {e:#}\n"));
+            // Shared memory unusable has its own status (71, `rig_process::host`), other errors 1.
+            let code = e.downcast_ref::<rig_process::host::HostError>().map_or(1, rig_process::host::HostError::exit_code);
             ExitCode::from(code as u8)
         }
     }
@@ -47,7 +47,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
     messages::services::validate_rig_name(&args.rig)?;
     let scenario = scenarios::Scenario::load(&args.scenario)?;
     // Before any node: the rig's iceoryx2 configuration and room in /dev/shm.
-    messages::host::prepare()?;
+    rig_process::host::prepare()?;
     let mut cfg = controller::daemon::DaemonConfig::new(&args.rig, scenario);
     cfg.rt_priority = args.rt_priority;
     if let Some(v) = args.contract_version {

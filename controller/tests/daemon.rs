@@ -1,4 +1,4 @@
-//! The daemon against an in-process fake plant (messages::ports::PlantPorts): it answers every
+//! The daemon against an in-process fake plant (rig_process::ports::PlantPorts): it answers every
 //! tick with the tick's number, exits cleanly on ShuttingDown, and exits with an error naming
 //! both versions on a contract mismatch and when the plant falls silent.
 
@@ -6,8 +6,8 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use controller::daemon::{run, DaemonConfig};
-use messages::ports::{PlantPorts, Wake};
 use messages::{JointState, PlantStatus, Wrench, WrenchFrame, CONTRACT_VERSION};
+use rig_process::ports::{PlantPorts, Wake};
 use scenarios::Scenario;
 
 fn unique_rig(tag: &str) -> String {

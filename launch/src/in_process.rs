@@ -95,7 +95,7 @@ pub fn run(
         drops,
         recording_stopped_early,
         mode: Mode::Lockstep,
-        rt: plant_sim::rt::RtSetup::default(),
+        rt: rig_process::rt::RtSetup::default(),
         live: None,
         probe: None,
         egm: None,

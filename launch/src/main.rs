@@ -317,7 +317,7 @@ fn prepare(
         controller,
         cache_dir,
         // Same CPU as plant-sim's lockstep loop.
-        controller_cpu: lockstep.then(plant_sim::rt::lockstep_cpu),
+        controller_cpu: lockstep.then(rig_process::rt::lockstep_cpu),
         quiet: false,
         live,
         host_probe: false,
@@ -558,7 +558,7 @@ fn case_result(
 }
 
 fn main() {
-    messages::logging::init_stderr();
+    rig_process::logging::init_stderr();
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Run(a) => (|| {
@@ -624,7 +624,7 @@ fn main() {
         Err(e) => {
             eprintln!("rig: error: {e:#}");
             // `rig replay` as a plant: the daemons' statuses for a taken rig name or unusable shared memory.
-            std::process::exit(e.downcast_ref::<messages::host::HostError>().map_or(1, messages::host::HostError::exit_code));
+            std::process::exit(e.downcast_ref::<rig_process::host::HostError>().map_or(1, rig_process::host::HostError::exit_code));
         }
     }
 }

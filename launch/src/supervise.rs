@@ -6,7 +6,7 @@ use std::process::{ExitStatus, Stdio};
 use std::time::Duration;
 
 use anyhow::Context;
-use messages::child::{describe_stopped, ended, SpawnOptions};
+use rig_process::child::{describe_stopped, ended, SpawnOptions};
 use tokio::io::AsyncReadExt;
 use tokio::process::{Child, Command};
 use tokio::signal::unix::{signal, SignalKind};
@@ -170,14 +170,14 @@ pub fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
     Ok(p)
 }
 
-/// [`messages::child::stop`] awaiting tokio's `wait`: SIGTERM, wait up to `grace`, then SIGKILL.
+/// [`rig_process::child::stop`] awaiting tokio's `wait`: SIGTERM, wait up to `grace`, then SIGKILL.
 /// Returns the exit status.
 async fn stop(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
     if let Ok(Some(s)) = child.try_wait() {
         return Some(s);
     }
     if let Some(pid) = child.id() {
-        messages::child::signal(pid, libc::SIGTERM);
+        rig_process::child::signal(pid, libc::SIGTERM);
     }
     match tokio::time::timeout(grace, child.wait()).await {
         Ok(Ok(s)) => Some(s),
@@ -188,12 +188,12 @@ async fn stop(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
     }
 }
 
-/// [`messages::child::await_or_stop`] awaiting tokio's `wait`: wait for a child to exit by itself
+/// [`rig_process::child::await_or_stop`] awaiting tokio's `wait`: wait for a child to exit by itself
 /// for `grace`, then stop it.
 async fn await_or_stop(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
     match tokio::time::timeout(grace, child.wait()).await {
         Ok(Ok(s)) => Some(s),
-        _ => stop(child, messages::child::GRACE).await,
+        _ => stop(child, rig_process::child::GRACE).await,
     }
 }
 
@@ -203,7 +203,7 @@ fn spawn(cmd: &mut Command, what: &str, bin: &Path) -> anyhow::Result<Child> {
     // SIGTERM to the child when rig dies, even by SIGKILL (the plant then finalises its
     // recording). PDEATHSIG follows the spawning thread: rig's runtime is current-thread, so this
     // is the main thread, which lives as long as rig.
-    messages::child::configure(cmd.as_std_mut(), SpawnOptions { own_process_group: true, die_with_parent: true });
+    rig_process::child::configure(cmd.as_std_mut(), SpawnOptions { own_process_group: true, die_with_parent: true });
     cmd.kill_on_drop(true);
     cmd.spawn().with_context(|| format!("starting the {what} {}", bin.display()))
 }
@@ -255,11 +255,11 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     };
     // Watch for the controller's first answer from before it starts (its earliest torque counts).
     let controller_pid = std::sync::Arc::new(std::sync::atomic::AtomicU32::new(0));
-    let connect_watch = match messages::connect::ConnectWatch::spawn(&l.rig, controller_pid.clone(), l.connect_timeout) {
+    let connect_watch = match rig_process::connect::ConnectWatch::spawn(&l.rig, controller_pid.clone(), l.connect_timeout) {
         Ok(w) => Some(w),
         Err(e) => {
             // The daemons report an unusable host themselves (exit 71); rig only loses this check.
-            tracing::debug!("no connect watch: {}", messages::ports::WithCauses(&e));
+            tracing::debug!("no connect watch: {}", rig_process::ports::WithCauses(&e));
             None
         }
     };
@@ -272,7 +272,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
         // SAFETY: between fork and exec only sched_setaffinity (async-signal-safe) runs.
         unsafe {
             ctrl_cmd.pre_exec(move || {
-                plant_sim::rt::pin_thread_to_cpu(cpu);
+                rig_process::rt::pin_thread_to_cpu(cpu);
                 Ok(())
             });
         }
@@ -286,7 +286,7 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     };
 
     controller_pid.store(controller.id().unwrap_or(0), std::sync::atomic::Ordering::Release);
-    let watch_stop = connect_watch.as_ref().map(messages::connect::ConnectWatch::stop_flag);
+    let watch_stop = connect_watch.as_ref().map(rig_process::connect::ConnectWatch::stop_flag);
     // Resolves only if the controller never connected (else it stays pending).
     let never_connected = async move {
         match connect_watch {

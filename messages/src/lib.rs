@@ -9,14 +9,11 @@
 //! Units are SI (m, rad, s, N, N m). Joint quantities are in the order of the DH joints 1..6 of the
 //! IRB 2400 (thesis Table 7.1). Every record carries [`CONTRACT_VERSION`] in its first field; a
 //! peer with another version is refused (see [`check_version`]).
+//!
+//! This crate is the contract and nothing else: payloads, their version, the service names and
+//! QoS, and the iceoryx2 configuration every peer of a rig loads. Opening the ports, host checks,
+//! liveness and the clocks of the rig's own processes are `rig-process`'s.
 
-pub mod child;
-pub mod connect;
-pub mod host;
-pub mod liveness;
-#[cfg(feature = "logging")]
-pub mod logging;
-pub mod ports;
 pub mod qos;
 pub mod services;
 
@@ -27,15 +24,11 @@ use iceoryx2::prelude::*;
 /// on the service `controller_diagnostics_v2`.
 pub const CONTRACT_VERSION: u32 = 2;
 
-/// CLOCK_MONOTONIC now, ns: the clock of every stage stamp of the contract (the plant's and the
-/// controller's, one clock on one host). A vDSO call, no syscall (about 20-30 ns).
-#[inline]
-pub fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    // SAFETY: valid pointer to a timespec.
-    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
-}
+/// The template of the iceoryx2 configuration every peer of a rig loads (`messages/iceoryx2.toml`;
+/// `rig_process::host` fills in its per-user values and writes it to the rig's state directory,
+/// see messages/README.md, "iceoryx2 configuration"). A peer with other settings does not see
+/// the rig's services.
+pub const ICEORYX2_CONFIG_TEMPLATE: &str = include_str!("../iceoryx2.toml");
 
 /// Number of robot joints.
 pub const DOF: usize = 6;
@@ -248,7 +241,7 @@ pub struct ControllerDiagnostics {
     pub force_integral_ns: f64,
     /// Controller compute time for this tick (wake to publish), ns.
     pub compute_time_ns: u64,
-    /// Stage stamps of this tick, CLOCK_MONOTONIC ns ([`monotonic_ns`]; 0 = not stamped): the
+    /// Stage stamps of this tick, CLOCK_MONOTONIC ns (the plant's clock on the same host; 0 = not stamped): the
     /// controller woke for this tick's state, finished computing its torque, handed the torque
     /// to iceoryx2 (taken just before this record and the torque are sent). The plant turns them
     /// into offsets from the tick's deadline on `/timing` and attributes misses with them.

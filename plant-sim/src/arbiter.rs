@@ -4,13 +4,13 @@
 //! torque publisher. Answers from any other publisher are ignored and reported once per
 //! publisher. Another publisher takes over only when the active one has missed
 //! `takeover_after_misses` ticks in a row (default 3) or is gone (its node is dead, see
-//! `messages::liveness`), and then the newest candidate (the publisher first heard last) that
+//! `rig_process::liveness`), and then the newest candidate (the publisher first heard last) that
 //! answered this tick: one switch per take-over; the gate blends it in.
 //!
 //! Pure, fixed-size logic: unit-tested here, driven by the plant loop.
 
-use messages::ports::{Answer, Answers};
 use messages::JointTorque;
+use rig_process::ports::{Answer, Answers};
 
 /// Publishers remembered (first heard, reported); more than the torque service allows.
 const SEEN: usize = 8;

@@ -17,7 +17,6 @@ pub mod pacer;
 pub mod physics;
 pub mod probe;
 pub mod rng;
-pub mod rt;
 pub mod run;
 pub mod sensor;
 pub mod signals;

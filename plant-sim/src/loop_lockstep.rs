@@ -17,8 +17,8 @@ use messages::PlantStatus;
 
 use crate::loop_rt::{PlantLoop, Wait};
 use crate::recording::EventKind;
-use crate::rt;
 use crate::stats::LoopStats;
+use rig_process::clock;
 
 /// How long a lockstep plant republishes the waiting state while no controller has answered yet.
 const LOCKSTEP_REPUBLISH: Duration = Duration::from_millis(5);
@@ -37,7 +37,7 @@ impl PlantLoop<'_> {
                 break;
             }
             let sim_t = tick as f64 * p.period_ns as f64 * 1e-9;
-            let (deadline_ns, skipped) = if paced { self.pace(&mut run, tick) } else { (rt::now_mono_ns(), 0) };
+            let (deadline_ns, skipped) = if paced { self.pace(&mut run, tick) } else { (clock::now_mono_ns(), 0) };
             let mut pb = self.publish(&mut run, tick, deadline_ns, skipped);
             // Wait for the torque of this tick (the active controller's; see the arbiter).
             let (budget_end_ns, budget_ns) = if paced {
@@ -56,7 +56,7 @@ impl PlantLoop<'_> {
                         break;
                     }
                     let _ = self.ports.publish(&pb.state, &pb.wrench);
-                    pb.publish_ns = rt::now_mono_ns();
+                    pb.publish_ns = clock::now_mono_ns();
                 }
                 (end, p.watchdog_ns)
             } else {
@@ -70,7 +70,7 @@ impl PlantLoop<'_> {
             if !paced && decision.missed && applied.torque.is_none() {
                 // Watchdog expired: pace in real time until a controller answers again.
                 paced = true;
-                run.pacer.restart_at(rt::now_mono_ns() + p.period_ns);
+                run.pacer.restart_at(clock::now_mono_ns() + p.period_ns);
                 let text = if run.gone_reported {
                     "the controller is gone: pacing in real time until a controller answers"
                 } else {

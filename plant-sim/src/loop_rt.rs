@@ -17,20 +17,20 @@
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
-use messages::liveness::PeerWatch;
-use messages::ports::{Answers, PlantPorts, Wake};
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench};
+use rig_process::liveness::PeerWatch;
+use rig_process::ports::{Answers, PlantPorts, Wake};
 use scenarios::Mode;
 
 use crate::arbiter::{Arbiter, ArbiterEvents, TakeoverReason};
 use crate::pacer::Pacer;
 use crate::recording::{ControllerStamps, EventKind, EventRecord, Recorder, StageStamps, TimingRecord};
-use crate::rt;
 use crate::signals::{ControllerEnd, Signals};
 use crate::stack_text::StackText;
 use crate::stats::LoopStats;
 use crate::tick::{PlantTick, TickOutcome};
 use crate::tick_events::EventHandOn;
+use rig_process::clock;
 
 /// Loop parameters.
 #[derive(Debug, Clone, Copy)]
@@ -151,7 +151,7 @@ impl PlantLoop<'_> {
     /// placed against it).
     pub(crate) fn start(&self) -> RunState {
         let p = self.params;
-        let (origin, origin_ns, origin_wall_ns) = (Instant::now(), rt::now_mono_ns(), rt::now_wall_ns());
+        let (origin, origin_ns, origin_wall_ns) = (Instant::now(), clock::now_mono_ns(), clock::now_wall_ns());
         let next_deadline_ns = origin_ns + p.period_ns;
         if let Some(probe) = self.probe {
             probe.set_grid(next_deadline_ns);
@@ -179,15 +179,15 @@ impl PlantLoop<'_> {
     /// Publish state and wrench of `tick` (due at `deadline_ns`), and empty the answers buffer
     /// for its answers.
     pub(crate) fn publish(&mut self, run: &mut RunState, tick: u64, deadline_ns: u64, skipped: u64) -> Published {
-        let wake_ns = rt::now_mono_ns();
+        let wake_ns = clock::now_mono_ns();
         let (state, wrench) = self.plant.outputs();
-        let publish_wall_ns = rt::now_wall_ns();
-        let publish_ns = rt::now_mono_ns();
+        let publish_wall_ns = clock::now_wall_ns();
+        let publish_ns = clock::now_mono_ns();
         if let Err(e) = self.ports.publish(&state, &wrench) {
-            tracing::error!("{}", messages::ports::WithCauses(&e));
+            tracing::error!("{}", rig_process::ports::WithCauses(&e));
             self.event(tick, self.sim_time_s(tick), EventKind::Fault, "publishing the state failed");
         }
-        let published_ns = rt::now_mono_ns();
+        let published_ns = clock::now_mono_ns();
         let period_ns = if run.last_publish_ns == 0 { 0 } else { publish_ns - run.last_publish_ns };
         if self.params.mode == Mode::Realtime && run.last_publish_ns != 0 {
             run.stats.jitter.record(period_ns.abs_diff(self.params.period_ns));
@@ -225,7 +225,7 @@ impl PlantLoop<'_> {
     /// wait may last the whole watchdog.
     ///
     /// Returns the wake-ups lost on the way: wait slices that ran out although a notification
-    /// had come and the answer then settled the tick (see `messages::ports` on iceoryx2's
+    /// had come and the answer then settled the tick (see `rig_process::ports` on iceoryx2's
     /// notification state; each costs up to one [`WAIT_SLICE`]).
     pub(crate) fn wait_for_answers(&self, tick: u64, deadline: Instant, answers: &mut Answers, wait: Wait) -> u64 {
         let settled = |answers: &Answers| self.arbiter.settled(answers, self.active_gone());
@@ -314,11 +314,11 @@ impl PlantLoop<'_> {
             w.follow(self.arbiter.active().unwrap_or(0));
         }
         self.report_arbiter(tick, sim_t, &arb_events);
-        let recv_ns = rt::now_mono_ns();
+        let recv_ns = clock::now_mono_ns();
         if torque.is_some() && run.first_answer.is_none() {
             run.first_answer = Some((pb.publish_ns, tick));
         }
-        let recv_wall_ns = if torque.is_some() { rt::now_wall_ns() } else { 0 };
+        let recv_wall_ns = if torque.is_some() { clock::now_wall_ns() } else { 0 };
         let (diag, late_diag) = self.ports.receive_diagnostics_from(self.watch.map_or(0, |w| w.companion()), tick);
 
         // A controller that is gone (rig reports its process ended, or the watcher saw its
@@ -378,7 +378,7 @@ impl PlantLoop<'_> {
             stages: None,
         };
         let mut rec = crate::tick::tick_record(pb.state, pb.wrench, &a.outcome, a.diag, timing);
-        let done_ns = rt::now_mono_ns();
+        let done_ns = clock::now_mono_ns();
         let plant_ns = pb.pre_ns + (done_ns - a.recv_ns);
         rec.timing.plant_compute_ns = plant_ns;
         let deadline_ns = pb.deadline_ns;
@@ -421,9 +421,9 @@ impl PlantLoop<'_> {
         stats.ticks = tick;
         stats.count_plant(self.plant);
         stats.foreign_answers = self.arbiter.ignored_answers();
-        stats.wall_s = (rt::now_mono_ns() - run.origin_ns) as f64 * 1e-9;
+        stats.wall_s = (clock::now_mono_ns() - run.origin_ns) as f64 * 1e-9;
         if let Some((t0, k0)) = run.first_answer {
-            stats.active_wall_s = (rt::now_mono_ns() - t0) as f64 * 1e-9;
+            stats.active_wall_s = (clock::now_mono_ns() - t0) as f64 * 1e-9;
             stats.active_sim_s = (tick - k0) as f64 * p.period_ns as f64 * 1e-9;
         }
         let (last, last_wrench) = self.plant.goodbye();

@@ -4,7 +4,7 @@
 //!
 //! Runs the plant daemon; at exit prints one line of JSON with the run's summary on stdout.
 //! Exit status: 0 run completed, 1 error, 69 the rig name is held by a live plant, 71 shared
-//! memory unusable (`messages::host`).
+//! memory unusable (`rig_process::host`).
 
 use std::path::PathBuf;
 
@@ -51,8 +51,8 @@ struct Args {
 }
 
 fn main() {
-    messages::logging::init_stderr();
-    messages::host::exit_on_sigbus("plant-sim");
+    rig_process::logging::init_stderr();
+    rig_process::host::exit_on_sigbus("plant-sim");
     let a = Args::parse();
     let opts = plant_sim::run::RunOptions {
         rig: a.rig.clone(),
@@ -67,11 +67,11 @@ fn main() {
     };
     match plant_sim::run::run(&opts) {
         // Both writes tolerate a closed pipe: a launcher killed with SIGKILL leaves its end closed.
-        Ok(summary) => messages::host::print_stdout(&format!("{}\n", summary.to_json(&a.rig))),
+        Ok(summary) => rig_process::host::print_stdout(&format!("{}\n", summary.to_json(&a.rig))),
         Err(e) => {
-            messages::host::print_stderr(&format!("plant-sim: error: {e:#}\n"));
+            rig_process::host::print_stderr(&format!("plant-sim: error: {e:#}\n"));
             // A host problem (rig name taken, shared memory unusable) has its own status.
-            let code = e.downcast_ref::<messages::host::HostError>().map_or(1, messages::host::HostError::exit_code);
+            let code = e.downcast_ref::<rig_process::host::HostError>().map_or(1, rig_process::host::HostError::exit_code);
             std::process::exit(code);
         }
     }

@@ -6,10 +6,10 @@
 use std::fmt::Write as _;
 
 use crate::recording::{EventKind, Recorder};
-use crate::rt;
 use crate::stack_text::StackText;
 use crate::stats::LoopStats;
 use crate::tick_events::record_event;
+use rig_process::clock;
 
 /// The grid of deadlines and the overrun log's rate limit.
 #[derive(Debug, Clone, Copy)]
@@ -46,7 +46,7 @@ impl Pacer {
     /// `stats.overruns`, each stall recorded in `/events` and logged at most once per second of
     /// ticks), slept until. Returns (deadline, periods skipped now).
     pub fn pace(&mut self, tick: u64, stats: &mut LoopStats, recorder: Option<&mut Recorder>) -> (u64, u64) {
-        let now = rt::now_mono_ns();
+        let now = clock::now_mono_ns();
         let (deadline, skipped) = skip_ahead(now, self.next_deadline_ns, self.period_ns);
         if skipped > 0 {
             let late_us = (now - self.next_deadline_ns) / 1000;
@@ -64,7 +64,7 @@ impl Pacer {
             let sim_time_s = tick as f64 * self.period_ns as f64 * 1e-9;
             record_event(recorder, tick, sim_time_s, EventKind::Info, s.as_str());
         }
-        rt::sleep_until_mono_ns(self.next_deadline_ns);
+        clock::sleep_until_mono_ns(self.next_deadline_ns);
         (self.next_deadline_ns, skipped)
     }
 }

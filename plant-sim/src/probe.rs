@@ -17,8 +17,8 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 
 use crate::histogram::Histogram;
-use crate::rt;
 pub use recordings::HOST_STALL_NS;
+use rig_process::{clock, rt};
 
 /// SCHED_FIFO priority of the probe threads: above the plant's loop (80) and the controller
 /// (80), so that what it measures is the host, not the rig; it runs for a few µs per period.
@@ -128,16 +128,16 @@ fn run(cpu: usize, period_ns: u64, latest: &Latest, stop: &AtomicBool) -> CpuRep
         if g != 0 || stop.load(Ordering::Relaxed) {
             break g;
         }
-        rt::sleep_until_mono_ns(rt::now_mono_ns() + period_ns);
+        clock::sleep_until_mono_ns(clock::now_mono_ns() + period_ns);
     };
     // Half a probe period after the plant's deadlines (whose period is a multiple of the probe's),
     // so the probe never wakes when the loop does; the first one still ahead.
     let phase = grid + period_ns / 2;
-    let now = rt::now_mono_ns();
+    let now = clock::now_mono_ns();
     let mut next = phase + now.saturating_sub(phase).div_ceil(period_ns) * period_ns;
     while grid != 0 && !stop.load(Ordering::Relaxed) {
-        rt::sleep_until_mono_ns(next);
-        let woke = rt::now_mono_ns();
+        clock::sleep_until_mono_ns(next);
+        let woke = clock::now_mono_ns();
         let late = woke.saturating_sub(next);
         latency.record(late);
         if latest.late_ns.fetch_max(late, Ordering::Relaxed) < late {
@@ -207,16 +207,16 @@ mod tests {
         // Real threads, real sleeps: correctness (counts, a stall recorded with its time), not timing.
         let cpus = allowed_cpus();
         assert!(!cpus.is_empty());
-        let started = rt::now_mono_ns();
+        let started = clock::now_mono_ns();
         let p = Probe::start(&cpus[..1], 1_000_000).unwrap();
         assert_eq!(p.latest.period_ns(), 1_000_000);
-        let t0 = rt::now_mono_ns();
+        let t0 = clock::now_mono_ns();
         p.latest.set_grid(t0);
         std::thread::sleep(std::time::Duration::from_millis(60));
         let (seen, at) = p.latest.take();
         assert!(seen == 0 || at > t0, "the stall's deadline {at} is on the probe's grid after {t0}");
         let r = p.finish();
-        let lived_ns = rt::now_mono_ns() - started;
+        let lived_ns = clock::now_mono_ns() - started;
         assert_eq!(r.len(), 1);
         assert_eq!((r[0].cpu, r[0].period_ns), (cpus[0], 1_000_000));
         // One wake-up per 1 ms deadline of the probe's life at most (stalls skip deadlines), and

@@ -9,8 +9,8 @@ use scenarios::{Mode, Scenario};
 use crate::loop_rt::{LoopParams, PlantLoop};
 use crate::physics::Physics;
 use crate::recording::{EventKind, EventRecord, Recorder, RecorderConfig};
-use crate::rt;
 use crate::stats::LoopStats;
+use rig_process::rt;
 
 /// Nice value of the lockstep loop thread: CFS weight ~9.3x a nice-0 thread, so a CPU-bound job
 /// sharing the lockstep CPU takes ~10 % of it instead of ~50 % (measured with a concurrent rustc
@@ -254,9 +254,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
 
     // Before any node: the rig's iceoryx2 configuration, room in /dev/shm, and this rig name for
     // this plant alone (held until the recording is finished).
-    let iox_config = messages::host::prepare()?;
-    let _claim = messages::host::claim_plant(&opts.rig, iox_config)?;
-    let cleaned = messages::ports::clean_dead_nodes();
+    let iox_config = rig_process::host::prepare()?;
+    let _claim = rig_process::host::claim_plant(&opts.rig, iox_config)?;
+    let cleaned = rig_process::ports::clean_dead_nodes();
     if cleaned > 0 {
         tracing::info!("removed the shared-memory leftovers of {cleaned} dead iceoryx2 node(s)");
     }
@@ -265,10 +265,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     let t_setup = std::time::Instant::now();
     let physics = Physics::new(&scenario, &opts.cache_dir)?;
     let t_physics = t_setup.elapsed();
-    let ports = messages::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
+    let ports = rig_process::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
     // Liveness of the controllers' nodes, on its own thread (started before the loop's real-time
     // set-up, so it keeps the normal scheduling policy).
-    let watch = messages::liveness::PeerWatch::spawn(&opts.rig, "plant-sim-watch", messages::liveness::Watched::Controllers)?;
+    let watch = rig_process::liveness::PeerWatch::spawn(&opts.rig, "plant-sim-watch", rig_process::liveness::Watched::Controllers)?;
     let mut arbiter = crate::arbiter::Arbiter::new(l.takeover_after_misses);
 
     // Lockstep: the recorder's writer thread inherits this thread's affinity when it is spawned;

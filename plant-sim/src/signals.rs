@@ -121,7 +121,7 @@ pub enum ControllerEnd {
     Signal(i32),
     Unknown,
     /// The process (`pid`) is alive but answered no state within the connect timeout; `rig`
-    /// stops it. `seen`: what `rig` saw of it (`messages::connect::NotConnected::code`).
+    /// stops it. `seen`: what `rig` saw of it (`rig_process::connect::NotConnected::code`).
     NeverConnected {
         pid: u32,
         seen: u8,
@@ -137,7 +137,7 @@ impl std::fmt::Display for ControllerEnd {
             ControllerEnd::NeverConnected { pid, seen } => write!(
                 f,
                 "never connected: process {pid} answered no state within loop.connect_timeout_s ({}); rig stops it",
-                messages::connect::NotConnected::what(*seen)
+                rig_process::connect::NotConnected::what(*seen)
             ),
         }
     }

@@ -37,7 +37,7 @@ pub struct LoopStats {
     /// The launcher reported the controller process ended, or its node was seen dead.
     pub controller_ended: bool,
     /// Torque wait slices that ran out although a notification had come, each costing up to
-    /// 1 ms: a wake-up iceoryx2 lost (`messages::ports`), or a controller preempted inside its
+    /// 1 ms: a wake-up iceoryx2 lost (`rig_process::ports`), or a controller preempted inside its
     /// `notify` (its event activated, its datagram not yet sent) for the rest of the slice.
     pub lost_wakeups: u64,
     /// The most ticks in a row that lost a wake-up. iceoryx2's lost wake-up, left alone, lasts

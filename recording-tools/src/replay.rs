@@ -10,9 +10,9 @@
 
 use crate::read::{open_for, Recording};
 use anyhow::{bail, Context};
-use messages::child::{self, SpawnOptions};
-use messages::ports::{PlantPorts, Wake};
 use messages::{PlantStatus, DOF};
+use rig_process::child::{self, SpawnOptions};
+use rig_process::ports::{PlantPorts, Wake};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -153,7 +153,7 @@ pub struct ReplayOutcome {
     pub comparison: Option<TorqueComparison>,
 }
 
-/// The spawned controller, killed if replay ends early ([`messages::child::Guard`]).
+/// The spawned controller, killed if replay ends early ([`rig_process::child::Guard`]).
 struct ChildGuard {
     proc: child::Guard,
 }
@@ -239,7 +239,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
     let tmp_dir = std::env::temp_dir().join(format!("rig-replay-{}", std::process::id()));
 
     // The replay is the rig's plant: not on a rig whose plant runs (nor may one start meanwhile).
-    let _claim = messages::host::claim_plant(&rig, messages::host::prepare()?)?;
+    let _claim = rig_process::host::claim_plant(&rig, rig_process::host::prepare()?)?;
     let ports = PlantPorts::open(&rig, "replay").with_context(|| format!("opening the services of rig {rig:?}"))?;
     let mut blend = 0;
     let mut guard = ChildGuard { proc: child::Guard(None) };

@@ -172,7 +172,7 @@ fn a_killed_and_an_interrupted_plant_leave_readable_files() {
         rec.check_continuity().unwrap();
         if signal == libc::SIGKILL {
             assert!(matches!(rec.integrity, Integrity::Cut(_)), "a SIGKILLed plant cannot have written the footer: {:?}", rec.integrity);
-            messages::ports::clean_dead_nodes();
+            rig_process::ports::clean_dead_nodes();
         } else {
             assert_eq!(rec.integrity, Integrity::Complete, "SIGINT must finalise the file ({status})");
             assert!(rec.summary_metadata("ticks_written").is_some());

@@ -10,9 +10,9 @@
 
 use std::time::{Duration, Instant};
 
-use messages::ports::ControllerPorts;
 use messages::{ControllerDiagnostics, JointTorque, PlantStatus, CONTRACT_VERSION};
 use rig_client::*;
+use rig_process::ports::ControllerPorts;
 
 const TICKS: u64 = 20_000;
 
@@ -50,9 +50,9 @@ fn rust_ports() {
         let t = JointTorque { contract_version: CONTRACT_VERSION, controller_status: 0, tick: st.tick, controller_id: 1, tau: [0.5; 6] };
         let d = ControllerDiagnostics {
             tick: st.tick,
-            woke_mono_ns: messages::monotonic_ns(),
-            computed_mono_ns: messages::monotonic_ns(),
-            published_mono_ns: messages::monotonic_ns(),
+            woke_mono_ns: rig_process::clock::now_mono_ns(),
+            computed_mono_ns: rig_process::clock::now_mono_ns(),
+            published_mono_ns: rig_process::clock::now_mono_ns(),
             ..ControllerDiagnostics::zeroed(CONTRACT_VERSION)
         };
         ports.publish(&t, Some(&d)).unwrap();

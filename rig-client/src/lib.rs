@@ -1,6 +1,6 @@
 //! `rig-client`: the rig's controller end with a C ABI (issue 27), for controllers in C or C++.
 //!
-//! It is the Rust controller's own port code (`messages::ports::ControllerPorts`: the rig's
+//! It is the Rust controller's own port code (`rig_process::ports::ControllerPorts`: the rig's
 //! iceoryx2 configuration by the state-directory rule, the contract's QoS, the same wait on the
 //! plant's event) behind plain C functions, plus the rig's robot model (`robot`, with the
 //! scenario's tool), so that a C or C++ program neither builds iceoryx2's C bindings nor
@@ -18,9 +18,9 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use messages::liveness::{PeerWatch, Watched};
-use messages::ports::{ControllerPorts, Wake, WithCauses};
 use messages::{state_flags, ControllerDiagnostics, JointState, JointTorque, PlantStatus, Wrench, CONTRACT_VERSION};
+use rig_process::liveness::{PeerWatch, Watched};
+use rig_process::ports::{ControllerPorts, Wake, WithCauses};
 use robot::Vec6;
 
 /// The contract version this library speaks (`messages::CONTRACT_VERSION`).
@@ -260,7 +260,7 @@ pub struct RigClient {
 }
 
 /// How long a wait looks at the plant's node between checks (the liveness watcher's period).
-const GONE_CHECK: Duration = messages::liveness::WATCH_PERIOD;
+const GONE_CHECK: Duration = rig_process::liveness::WATCH_PERIOD;
 /// Longest wait for the wrench of the tick whose state arrived (the Rust controller's).
 const WRENCH_WAIT: Duration = Duration::from_micros(50);
 
@@ -312,7 +312,7 @@ fn open(rig: &str, role: &str, scenario_path: Option<&str>, timeout: Duration) -
     let s = scenario(scenario_path)?;
     messages::services::validate_rig_name(rig).map_err(|e| fail(RIG_ERR_INVALID_ARGUMENT, format!("rig-client: {e}")))?;
     // A killed peer leaves its shared memory behind.
-    messages::ports::clean_dead_nodes();
+    rig_process::ports::clean_dead_nodes();
     let ports = ControllerPorts::open(rig, role).map_err(|e| fail(RIG_ERR_OPEN, format!("rig-client: {}", WithCauses(&e))))?;
     let watch = PeerWatch::spawn(rig, &format!("{role}-watch"), Watched::Plant)
         .map_err(|e| fail(RIG_ERR_OPEN, format!("rig-client: {}", WithCauses(&e))))?;
@@ -324,7 +324,7 @@ fn open(rig: &str, role: &str, scenario_path: Option<&str>, timeout: Duration) -
                 format!(
                     "rig-client: no joint state on rig {rig:?} within {:.1} s: is plant-sim running on this rig (iceoryx2 configuration {})?",
                     timeout.as_secs_f64(),
-                    messages::host::config_path().display()
+                    rig_process::host::config_path().display()
                 ),
             ));
         }
@@ -388,7 +388,7 @@ impl RigClient {
             let slice = deadline.min(Instant::now() + GONE_CHECK);
             let wake = self.ports.wait_state_spinning(self.next_due.map(|d| (d, self.spin)), slice);
             let woke = Instant::now();
-            let woke_mono_ns = messages::monotonic_ns();
+            let woke_mono_ns = rig_process::clock::now_mono_ns();
             let Some((st, origin)) = self.ports.receive_state_with_origin() else {
                 if wake == Wake::Timeout {
                     if self.plant.is_some_and(|p| self.watch.is_gone(p)) {
@@ -456,7 +456,7 @@ impl RigClient {
 
     /// The publish of `rig_client_publish`.
     pub fn publish(&mut self, tick: u64, controller_status: u32, tau: &[f64; 6], diag: Option<&RigControllerDiagnostics>) -> i32 {
-        let computed_mono_ns = messages::monotonic_ns();
+        let computed_mono_ns = rig_process::clock::now_mono_ns();
         let t = JointTorque { contract_version: CONTRACT_VERSION, controller_status, tick, controller_id: self.controller_id, tau: *tau };
         let mut d = diag.map_or(ControllerDiagnostics::zeroed(CONTRACT_VERSION), contract_diagnostics);
         d.contract_version = CONTRACT_VERSION;
@@ -466,7 +466,7 @@ impl RigClient {
             d.compute_time_ns = self.woke.elapsed().as_nanos() as u64;
         }
         d.computed_mono_ns = computed_mono_ns;
-        d.published_mono_ns = messages::monotonic_ns();
+        d.published_mono_ns = rig_process::clock::now_mono_ns();
         match self.ports.publish(&t, Some(&d)) {
             Ok(()) => {
                 self.last_published = Some(self.last_published.map_or(tick, |l| l.max(tick)));
@@ -738,8 +738,8 @@ pub unsafe extern "C" fn rig_model_inverse_dynamics(
 /// one arrived, or after 1 s) and then the goodbye. Not part of the C API.
 #[doc(hidden)]
 pub mod loopback {
-    use messages::ports::PlantPorts;
     use messages::{JointState, PlantStatus, Wrench, CONTRACT_VERSION};
+    use rig_process::ports::PlantPorts;
     use std::time::{Duration, Instant};
 
     /// A rig name unique to this process and call.

@@ -16,9 +16,9 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::time::{Duration, Instant};
 
-use messages::ports::ControllerPorts;
 use messages::{ControllerDiagnostics, JointTorque, CONTRACT_VERSION};
 use rig_client::*;
+use rig_process::ports::ControllerPorts;
 
 struct Counting;
 

@@ -4,7 +4,7 @@
 //!
 //! The binaries must be built first: `cargo build --release --workspace --bins`.
 
-use messages::child::{self, SpawnOptions};
+use rig_process::child::{self, SpawnOptions};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus};

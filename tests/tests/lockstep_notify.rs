@@ -1,7 +1,7 @@
 //! Issue 22 item 4: no lost iceoryx2 notification in lockstep with a second controller. The real
 //! `plant-sim` in lockstep and two `hold-controller`s answering every tick (one active, one
 //! ignored): both notify the plant's torque listener for the same tick, the race that left
-//! iceoryx2 0.10's listener in a state where later notifications wake nobody (`messages::ports`,
+//! iceoryx2 0.10's listener in a state where later notifications wake nobody (`rig_process::ports`,
 //! `drain_then_wait`). The plant counts a lost wake-up when a 1 ms wait slice ran out although
 //! a notification was there (`lost_wakeups` in its summary). Left alone, iceoryx2's lost wake-up
 //! lasts until the listener is drained, which the waits before issue 22 did only after a

@@ -84,7 +84,7 @@ fn never_connected(tag: &str, mode: &str, flags: &[&str], seen: &str) {
 #[test]
 fn a_controller_on_iceoryx2s_default_configuration_is_named_with_the_rigs_configuration_file() {
     let _g = serial();
-    let cfg = messages::host::config_path();
+    let cfg = rig_process::host::config_path();
     never_connected("nc-defaults", "lockstep", &["--iceoryx2-defaults"], &format!("load that configuration, {}", cfg.display()));
 }
 

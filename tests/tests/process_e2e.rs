@@ -12,9 +12,9 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use harness::*;
-use messages::host::{EXIT_RIG_TAKEN, EXIT_SHARED_MEMORY};
 use recording_tools::read::Recording;
 use recordings::EventKind;
+use rig_process::host::{EXIT_RIG_TAKEN, EXIT_SHARED_MEMORY};
 
 static SERIAL: Mutex<()> = Mutex::new(());
 
@@ -352,7 +352,7 @@ fn in_namespace(script: &str) -> (Option<i32>, String, String) {
 }
 
 /// A state directory for one test, short enough for iceoryx2's socket paths
-/// (`messages::host::MAX_STATE_DIR_LEN`).
+/// (`rig_process::host::MAX_STATE_DIR_LEN`).
 fn short_state_dir(tag: &str) -> String {
     let d = format!("/tmp/rs-{tag}-{}", std::process::id());
     let _ = std::fs::remove_dir_all(&d);

@@ -586,7 +586,7 @@ fn a_dead_controller_under_rig_run_is_recorded_puts_the_plant_into_safe_stop_and
 }
 
 /// The same in lockstep. Needs a plant fix: the lockstep plant waits for the torque up to its
-/// watchdog (2 s) without looking at signals (`messages::ports::wait_readable` resumes `ppoll`
+/// watchdog (2 s) without looking at signals (`rig_process::ports::wait_readable` resumes `ppoll`
 /// after EINTR), and when rig's SIGTERM has arrived by then, the loop breaks on
 /// `stop_requested()` before it reads the controller-end report: no controller_ended entry, no
 /// safe stop, and the plant stops 2 s after the kill instead of 100 ms.

@@ -34,12 +34,12 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    messages::logging::init_stderr();
+    rig_process::logging::init_stderr();
     let args = Args::parse();
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            messages::host::print_stderr(&format!("egm-controller: error: {e:#}\n"));
+            rig_process::host::print_stderr(&format!("egm-controller: error: {e:#}\n"));
             ExitCode::from(1)
         }
     }

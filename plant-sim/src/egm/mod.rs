@@ -43,12 +43,12 @@ use scenarios::{Mode, Scenario};
 
 use crate::pacer::Pacer;
 use crate::recording::{EgmRecord, EventKind, EventRecord, Recorder, TimingRecord};
-use crate::rt;
 use crate::signals::Signals;
 use crate::stack_text::StackText;
 use crate::stats::LoopStats;
 use crate::tick::PlantTick;
 use crate::tick_events::{EventHandOn, PlantEvent};
+use rig_process::clock;
 use servo::{Servo, ServoParams};
 use session::{Refusal, Rules, SensorBuffer};
 
@@ -181,7 +181,7 @@ impl<'a> EgmLoop<'a> {
             out: Vec::with_capacity(2048),
             state: SessionState::Waiting,
             robot_seqno: 0,
-            start_wall_ns: rt::now_wall_ns(),
+            start_wall_ns: clock::now_wall_ns(),
         })
     }
 
@@ -317,7 +317,7 @@ impl EgmLoop<'_> {
     /// Run until `n_ticks` ticks are integrated or a stop signal arrives.
     pub fn run(&mut self) -> (LoopStats, EgmStats) {
         let p = EgmParams { sensor: self.params.sensor, ..self.params };
-        let origin_ns = rt::now_mono_ns();
+        let origin_ns = clock::now_mono_ns();
         let mut run = Run {
             stats: LoopStats::empty(),
             es: EgmStats::default(),
@@ -340,8 +340,8 @@ impl EgmLoop<'_> {
             if p.mode == Mode::Realtime {
                 run.pacer.pace(tick, &mut run.stats, self.recorder.as_deref_mut());
             }
-            let wake_ns = rt::now_mono_ns();
-            let publish_wall_ns = rt::now_wall_ns();
+            let wake_ns = clock::now_mono_ns();
+            let publish_wall_ns = clock::now_wall_ns();
             let cycle_tick = tick.is_multiple_of(p.cycle_ticks);
             // 1. The EGM exchange of this cycle.
             if !self.exchange(&p, tick, cycle_tick, &mut run) {
@@ -356,13 +356,13 @@ impl EgmLoop<'_> {
             let replies = self.take_replies(&p, tick, wake_ns, cycle_tick, &mut run);
             // Reply latency: from this cycle's EgmRobot to the reply taken (real time: at the tick
             // the reply was found, so to within a tick).
-            let latency_ns = if replies.answered { rt::now_mono_ns() - run.last_sent_ns } else { 0 };
+            let latency_ns = if replies.answered { clock::now_mono_ns() - run.last_sent_ns } else { 0 };
             if replies.answered {
                 run.stats.round_trip.record(latency_ns);
             }
             self.record_cycle(&p, tick, cycle_tick, &replies, latency_ns, &mut run);
             // 3. Session timeout: no valid sensor message for comm_timeout (wall clock).
-            if self.state == SessionState::Running && rt::now_mono_ns().saturating_sub(run.last_valid_ns) > p.comm_timeout_ns {
+            if self.state == SessionState::Running && clock::now_mono_ns().saturating_sub(run.last_valid_ns) > p.comm_timeout_ns {
                 let mut s = StackText::new();
                 let _ = write!(
                     s,
@@ -374,7 +374,7 @@ impl EgmLoop<'_> {
             // 4.-6. The servo's tick through the plant's core, its events, its record.
             let timing = TimingRecord {
                 publish_wall_ns,
-                torque_receive_wall_ns: if replies.answered { rt::now_wall_ns() } else { 0 },
+                torque_receive_wall_ns: if replies.answered { clock::now_wall_ns() } else { 0 },
                 round_trip_ns: latency_ns,
                 period_ns: p.period_ns,
                 missed: false,
@@ -399,7 +399,7 @@ impl EgmLoop<'_> {
         }
         run.es.cycles += 1;
         self.send_robot(tick);
-        run.last_sent_ns = rt::now_mono_ns();
+        run.last_sent_ns = clock::now_mono_ns();
         if p.mode == Mode::Lockstep {
             if self.state == SessionState::Waiting {
                 while !self.signals.stop_requested() && !self.wait_readable(LOCKSTEP_RESEND) {
@@ -437,7 +437,7 @@ impl EgmLoop<'_> {
                     run.cycle.joints_ref_deg = a.joints_deg;
                     run.cycle.speed_ref_deg_s = a.speed_deg_s;
                     run.refusing = false;
-                    run.last_valid_ns = rt::now_mono_ns();
+                    run.last_valid_ns = clock::now_mono_ns();
                     self.servo.set_reference(a.q_ref, a.qd_ref);
                     if self.state == SessionState::Waiting {
                         self.state = SessionState::Running;
@@ -500,8 +500,8 @@ impl EgmLoop<'_> {
         } as u32;
         let tau = self.servo.tick(&Vec6::from(state.q), &Vec6::from(state.qd));
         let tau = Vec6::from_fn(|i, _| tau[i].clamp(-Robot::TORQUE_LIMIT_NM[i], Robot::TORQUE_LIMIT_NM[i]));
-        let pre_ns = rt::now_mono_ns() - wake_ns;
-        let t0 = rt::now_mono_ns();
+        let pre_ns = clock::now_mono_ns() - wake_ns;
+        let t0 = clock::now_mono_ns();
         let outcome = self.plant.advance_servo(&tau);
         for r in outcome.events.iter() {
             match r.event {
@@ -517,7 +517,7 @@ impl EgmLoop<'_> {
                 _ => run.hand_on.one(r, self.recorder.as_deref_mut()),
             }
         }
-        let plant_ns = pre_ns + (rt::now_mono_ns() - t0);
+        let plant_ns = pre_ns + (clock::now_mono_ns() - t0);
         run.stats.plant_compute.record(plant_ns);
         timing.plant_compute_ns = plant_ns;
         if let Some(r) = self.recorder.as_deref_mut() {
@@ -535,10 +535,10 @@ impl EgmLoop<'_> {
         }
         stats.ticks = tick;
         stats.refusals = es.refused;
-        stats.wall_s = (rt::now_mono_ns() - origin_ns) as f64 * 1e-9;
+        stats.wall_s = (clock::now_mono_ns() - origin_ns) as f64 * 1e-9;
         stats.sim_s = self.plant.physics().time_s();
         if let Some((t0, k0)) = first_answer {
-            stats.active_wall_s = (rt::now_mono_ns() - t0) as f64 * 1e-9;
+            stats.active_wall_s = (clock::now_mono_ns() - t0) as f64 * 1e-9;
             stats.active_sim_s = (tick - k0) as f64 * p.period_ns as f64 * 1e-9;
         }
         let mut s = StackText::new();

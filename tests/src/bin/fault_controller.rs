@@ -26,9 +26,9 @@
 use std::time::{Duration, Instant};
 
 use clap::Parser;
-use messages::liveness::{PeerWatch, Watched};
-use messages::ports::{ControllerPorts, Wake};
 use messages::{ControllerDiagnostics, ControllerStatus, JointTorque, PlantStatus, CONTRACT_VERSION};
+use rig_process::liveness::{PeerWatch, Watched};
+use rig_process::ports::{ControllerPorts, Wake};
 use robot::params::{TORQUE_LIMIT_NM, VELOCITY_LIMIT_RADPS};
 use robot::Vec6;
 
@@ -133,7 +133,7 @@ fn run(a: &Args) -> anyhow::Result<u64> {
     let robot = scenarios::geometry::nominal_robot(&s);
     let period = s.loop_.period_s;
     let stall = Duration::from_secs_f64(s.loop_.peer_stall_timeout_s);
-    messages::ports::clean_dead_nodes();
+    rig_process::ports::clean_dead_nodes();
     if a.rt_priority > 0 {
         let param = libc::sched_param { sched_priority: a.rt_priority };
         // SAFETY: a plain syscall on the calling thread with a valid parameter.
@@ -173,7 +173,7 @@ fn run(a: &Args) -> anyhow::Result<u64> {
             continue;
         };
         let t0 = Instant::now();
-        let woke_mono_ns = messages::monotonic_ns();
+        let woke_mono_ns = rig_process::clock::now_mono_ns();
         last_state = t0;
         if plant != Some(origin) {
             plant = Some(origin);
@@ -232,13 +232,13 @@ fn run(a: &Args) -> anyhow::Result<u64> {
             tau: tau.into(),
         };
         // Stage stamps: a --sleep-us delay counts as compute (it sits between waking and the answer).
-        let computed_mono_ns = messages::monotonic_ns();
+        let computed_mono_ns = rig_process::clock::now_mono_ns();
         let d = ControllerDiagnostics {
             tick: st.tick,
             compute_time_ns: t0.elapsed().as_nanos() as u64,
             woke_mono_ns,
             computed_mono_ns,
-            published_mono_ns: messages::monotonic_ns(),
+            published_mono_ns: rig_process::clock::now_mono_ns(),
             ..ControllerDiagnostics::zeroed(CONTRACT_VERSION)
         };
         // A stranger publishes torques only, like a process that knows nothing of the contract's

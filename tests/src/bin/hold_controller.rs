@@ -20,8 +20,8 @@
 use std::time::{Duration, Instant};
 
 use clap::Parser;
-use messages::ports::{ControllerPorts, Wake};
 use messages::{ControllerDiagnostics, ControllerStatus, JointTorque, PlantStatus, CONTRACT_VERSION};
+use rig_process::ports::{ControllerPorts, Wake};
 use robot::Vec6;
 
 #[derive(Debug, Parser)]
@@ -186,7 +186,7 @@ fn run(a: &Args) -> anyhow::Result<()> {
     if a.iceoryx2_defaults {
         return defaults_only(&a.rig);
     }
-    messages::ports::clean_dead_nodes();
+    rig_process::ports::clean_dead_nodes();
     let ports = ControllerPorts::open(a.open_rig.as_deref().unwrap_or(&a.rig), "hold-controller")?;
     let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
     let id = ((std::process::id() as u64) << 32) | nanos as u64;

@@ -1,4 +1,4 @@
-//! The two ends of a rig's services, opened with the QoS of [`crate::qos`].
+//! The two ends of a rig's services, opened with the QoS of [`messages::qos`].
 //!
 //! [`PlantPorts`] is what the plant (or the replay tool acting as a plant) opens;
 //! [`ControllerPorts`] is what a controller opens. Both wake on an iceoryx2 event whose listener
@@ -8,8 +8,8 @@
 //! Everything after `open` is allocation-free and lock-free (`ipc::Service` ports are
 //! single-threaded), so these calls may sit on the 1 kHz path.
 
-use crate::{qos, services, ControllerDiagnostics, JointState, JointTorque, Wrench};
 use iceoryx2::prelude::*;
+use messages::{qos, services, ControllerDiagnostics, JointState, JointTorque, Wrench};
 use std::time::{Duration, Instant};
 
 type Pub<T> = iceoryx2::port::publisher::Publisher<ipc::Service, T, ()>;
@@ -547,7 +547,7 @@ impl ControllerPorts {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::CONTRACT_VERSION;
+    use messages::CONTRACT_VERSION;
 
     fn unique_rig(tag: &str) -> String {
         let n = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos();
@@ -555,7 +555,7 @@ mod tests {
     }
 
     fn state(tick: u64) -> JointState {
-        JointState::at_rest(tick, crate::PlantStatus::Running, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+        JointState::at_rest(tick, messages::PlantStatus::Running, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     }
 
     #[test]

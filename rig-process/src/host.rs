@@ -46,7 +46,7 @@ pub const SHM_REQUIRED_BYTES: u64 = 4 * RIG_SHM_BYTES;
 pub const MAX_STATE_DIR_LEN: usize = 40;
 
 /// The shipped template of the rig's iceoryx2 configuration.
-pub const CONFIG_TEMPLATE: &str = include_str!("../iceoryx2.toml");
+pub const CONFIG_TEMPLATE: &str = messages::ICEORYX2_CONFIG_TEMPLATE;
 
 /// Environment variable that moves the state directory (every peer of a rig must see the same).
 pub const STATE_DIR_ENV: &str = "RIG_ICEORYX2_DIR";

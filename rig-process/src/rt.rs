@@ -1,11 +1,15 @@
-//! Operating-system knobs of a real-time loop thread (Linux): timer slack, SCHED_FIFO, mlockall,
-//! absolute sleeps on CLOCK_MONOTONIC and clocks. The process' signals are `signals.rs`'s.
+//! Operating-system knobs of a real-time loop thread (Linux), written once for the plant and the
+//! controller: timer slack, SCHED_FIFO, mlockall, CPU affinity, nice, the idle-poll latency
+//! request. The clocks and absolute sleeps are [`crate::clock`]'s.
 
 /// What the real-time set-up achieved (logged once at start).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct RtSetup {
     pub timer_slack_1ns: bool,
     pub sched_fifo: bool,
+    /// Why SCHED_FIFO was refused: the error number `pthread_setschedparam` returned (0 when
+    /// granted or not requested).
+    pub sched_fifo_errno: i32,
     pub mlockall: bool,
 }
 
@@ -20,7 +24,8 @@ pub fn setup_thread(priority: Option<i32>) -> RtSetup {
         r.timer_slack_1ns = libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) == 0;
         if let Some(priority) = priority {
             let param = libc::sched_param { sched_priority: priority };
-            r.sched_fifo = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) == 0;
+            r.sched_fifo_errno = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param);
+            r.sched_fifo = r.sched_fifo_errno == 0;
         }
         r.mlockall = libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0;
     }
@@ -86,38 +91,4 @@ pub fn hold_idle_poll() -> std::io::Result<()> {
     f.write_all(&0i32.to_ne_bytes())?;
     let _ = HELD.set(f);
     Ok(())
-}
-
-/// CLOCK_MONOTONIC now, ns.
-#[inline]
-pub fn now_mono_ns() -> u64 {
-    clock_ns(libc::CLOCK_MONOTONIC)
-}
-
-/// CLOCK_REALTIME now, ns since the Unix epoch (recorded timestamps).
-#[inline]
-pub fn now_wall_ns() -> u64 {
-    clock_ns(libc::CLOCK_REALTIME)
-}
-
-#[inline]
-fn clock_ns(clock: libc::clockid_t) -> u64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    // SAFETY: valid pointer to a timespec.
-    unsafe { libc::clock_gettime(clock, &mut ts) };
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
-}
-
-/// Sleep until CLOCK_MONOTONIC reaches `t_ns` (absolute, so errors do not accumulate).
-#[inline]
-pub fn sleep_until_mono_ns(t_ns: u64) {
-    let ts = libc::timespec { tv_sec: (t_ns / 1_000_000_000) as libc::time_t, tv_nsec: (t_ns % 1_000_000_000) as libc::c_long };
-    loop {
-        // SAFETY: valid timespec; a null remainder is allowed with TIMER_ABSTIME.
-        let rc = unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
-        // Interrupted by a signal: sleep on to the same deadline (a stop is seen at the next tick).
-        if rc != libc::EINTR {
-            return;
-        }
-    }
 }

@@ -17,7 +17,7 @@ use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 
 use crate::ports::{PortError, PsFactory};
-use crate::{services, JointState, JointTorque, PlantStatus, CONTRACT_VERSION};
+use messages::{services, JointState, JointTorque, PlantStatus, CONTRACT_VERSION};
 
 /// What a launcher saw of a controller process that answered no state within the connect timeout.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -15,7 +15,7 @@ use std::time::Duration;
 use iceoryx2::prelude::*;
 
 use crate::ports::PortError;
-use crate::services;
+use messages::services;
 
 /// How often the node list is read: a dead peer is seen within this plus the scan, well inside
 /// the 100 ms the contract promises.
@@ -203,10 +203,10 @@ fn watch_thread(rig: &str, role: &str, watched: Watched, sh: &Shared, ready: &st
     let setup = (|| -> Result<_, PortError> {
         let node = crate::ports::node(rig, role)?;
         let (main, companion) = match watched {
-            Watched::Plant => (Either::State(open::<crate::JointState>(&node, rig, services::JOINT_STATE)?), None),
+            Watched::Plant => (Either::State(open::<messages::JointState>(&node, rig, services::JOINT_STATE)?), None),
             Watched::Controllers => (
-                Either::Torque(open::<crate::JointTorque>(&node, rig, services::JOINT_TORQUE)?),
-                Some(open::<crate::ControllerDiagnostics>(&node, rig, services::CONTROLLER_DIAGNOSTICS)?),
+                Either::Torque(open::<messages::JointTorque>(&node, rig, services::JOINT_TORQUE)?),
+                Some(open::<messages::ControllerDiagnostics>(&node, rig, services::CONTROLLER_DIAGNOSTICS)?),
             ),
         };
         Ok((node, main, companion))
@@ -260,6 +260,6 @@ fn watch_thread(rig: &str, role: &str, watched: Watched, sh: &Shared, ready: &st
 }
 
 enum Either {
-    State(Factory<crate::JointState>),
-    Torque(Factory<crate::JointTorque>),
+    State(Factory<messages::JointState>),
+    Torque(Factory<messages::JointTorque>),
 }
