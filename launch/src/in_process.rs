@@ -28,7 +28,7 @@ pub const SWEEP_COMPRESSION_LEVEL: u32 = 1;
 /// or its nominal trajectory), recorded to `recording` when the scenario records, with the
 /// writer's `tuning`. `physics` builds the plant (a sweep shares the strip tables across its
 /// cases). `signals`: a stop ends the run after the current tick. Returns the plant's summary,
-/// the JSON `plant-sim` prints.
+/// the one `plant-sim` prints (the recording's metadata says the run was in process).
 pub fn run(
     rig: &str,
     scenario_path: &Path,
@@ -37,7 +37,7 @@ pub fn run(
     tuning: recordings::RecorderTuning,
     physics: impl FnOnce(&Scenario) -> anyhow::Result<Physics>,
     signals: plant_sim::signals::Signals,
-) -> anyhow::Result<serde_json::Value> {
+) -> anyhow::Result<recordings::PlantSummary> {
     let s = Scenario::load(scenario_path)?;
     anyhow::ensure!(!s.egm.enabled, "--in-process: {} enables [egm]; the EGM path runs with its daemons only", scenario_path.display());
     let text = std::fs::read_to_string(scenario_path).with_context(|| format!("reading {}", scenario_path.display()))?;
@@ -100,7 +100,5 @@ pub fn run(
         probe: None,
         egm: None,
     };
-    let mut v = summary.to_json(rig);
-    v["transport"] = "in-process".into();
-    Ok(v)
+    Ok(summary.to_summary(rig))
 }

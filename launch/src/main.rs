@@ -344,7 +344,7 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
                 print!("{}", summary::timing_report(v));
                 // Whose fault each miss is, from the recording's stage stamps (the one attribution
                 // `rig report` uses too).
-                if let Some(path) = v.get("recording").and_then(serde_json::Value::as_str) {
+                if let Some(path) = &v.recording {
                     match recording_tools::read::Recording::open(Path::new(path)) {
                         Ok(rec) => {
                             print!("{}", recording_tools::attribution::format_table(&recording_tools::attribution::attribute(&rec.timing)))
@@ -354,7 +354,7 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
                 }
             }
             print!("{}", summary::run_summary(v));
-            let path = v.get("recording").and_then(serde_json::Value::as_str).filter(|_| !timing);
+            let path = v.recording.as_deref().filter(|_| !timing);
             let numbers = path.and_then(|path| match recording_tools::cli::summary_numbers(Path::new(path)) {
                 Ok(n) => Some(n),
                 Err(e) => {
@@ -364,7 +364,8 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
             });
             print!("{}", summary::recording_summary(v, numbers.as_ref()));
             if let Some(p) = json_out {
-                std::fs::write(p, serde_json::to_string_pretty(v)?).with_context(|| format!("writing {}", p.display()))?;
+                // Keys sorted at every level, as the plant's line.
+                std::fs::write(p, serde_json::to_string_pretty(&v.to_value())?).with_context(|| format!("writing {}", p.display()))?;
             }
         }
         None => eprintln!("rig: the plant printed no summary"),
@@ -437,7 +438,7 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
         }
     };
     print!("{}", summary::recording_summary(&v, numbers.as_ref()));
-    let ending = if v["stopped_by_signal"].as_bool() == Some(true) { Ending::Interrupted } else { Ending::Completed };
+    let ending = if v.stopped_by_signal { Ending::Interrupted } else { Ending::Completed };
     let outcome = supervise::Outcome { ending, plant_summary: Some(v) };
     let code = outcome.exit_code();
     println!("{}", summary::status_line(code, &outcome.ending, outcome.plant_summary.as_ref()));
@@ -504,7 +505,7 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
             let tuning = recordings::RecorderTuning { compression_level: in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
             let summary = in_process::run(&rig, path, a.launch.duration, &recording, tuning, |s| strips.physics(s), signals);
             let (ending, summary) = match summary {
-                Ok(v) if v["stopped_by_signal"].as_bool() == Some(true) => (Ending::Interrupted, Some(v)),
+                Ok(v) if v.stopped_by_signal => (Ending::Interrupted, Some(v)),
                 Ok(v) => (Ending::Completed, Some(v)),
                 Err(e) => (Ending::PlantFailed(format!("{e:#}")), None),
             };
@@ -546,8 +547,8 @@ fn case_result(
         recording: recording.to_path_buf(),
         exit_code,
         status,
-        misses: summary.and_then(|v| v.get("misses")).and_then(serde_json::Value::as_u64),
-        safe_stops: summary.and_then(|v| v.get("safe_stops")).and_then(serde_json::Value::as_u64),
+        misses: summary.map(|v| v.misses),
+        safe_stops: summary.map(|v| v.safe_stops),
         force_error_max_n: rolling.as_ref().and_then(|r| r.force_error_max_abs_n),
         force_error_rms_n: rolling.as_ref().and_then(|r| r.force_error_rms_n),
         bond_share: rolling.as_ref().and_then(|r| r.bond_pressure_share),

@@ -97,11 +97,11 @@ impl Ending {
     }
 }
 
-/// Result of a supervised run: the ending, and the plant's JSON summary line if it printed one.
+/// Result of a supervised run: the ending, and the plant's summary if it printed one that reads.
 #[derive(Debug)]
 pub struct Outcome {
     pub ending: Ending,
-    pub plant_summary: Option<serde_json::Value>,
+    pub plant_summary: Option<recordings::PlantSummary>,
 }
 
 /// How long the plant gets between rig's report that the controller ended (SIGUSR1) and its
@@ -408,6 +408,24 @@ async fn plant_alone(plant: &mut Child) -> anyhow::Result<Ending> {
     })
 }
 
+/// The plant's summary from its stdout (its last line that is a JSON object). One that does not
+/// read (a field missing) is a failed plant, named in the ending when the run reached its end
+/// (else said on stderr): rig does not guess the missing numbers.
+pub fn read_summary(ending: Ending, stdout: &str) -> (Ending, Option<recordings::PlantSummary>) {
+    let line = stdout.lines().rev().find_map(|line| serde_json::from_str::<serde_json::Value>(line).ok().filter(|v| v.is_object()));
+    match line.map(recordings::PlantSummary::from_value) {
+        None => (ending, None),
+        Some(Ok(s)) => (ending, Some(s)),
+        Some(Err(e)) => match ending {
+            Ending::Completed => (Ending::PlantFailed(e.to_string()), None),
+            other => {
+                eprintln!("rig: {e}");
+                (other, None)
+            }
+        },
+    }
+}
+
 /// The outcome with the plant's summary line, once its stdout is read to the end.
 async fn finish(
     ending: Ending,
@@ -416,10 +434,10 @@ async fn finish(
     plant_told: bool,
 ) -> anyhow::Result<Outcome> {
     let out = tokio::time::timeout(Duration::from_secs(5), reader).await.ok().and_then(|r| r.ok()).unwrap_or_default();
-    let plant_summary = out.lines().rev().find_map(|line| serde_json::from_str::<serde_json::Value>(line).ok());
+    let (ending, plant_summary) = read_summary(ending, &out);
     // A plant that exits 0 after a stop signal did not reach its end: rig stopped it because the
     // controller exited first, or somebody else stopped it.
-    let stopped_by_signal = plant_summary.as_ref().and_then(|v| v.get("stopped_by_signal")).and_then(serde_json::Value::as_bool);
+    let stopped_by_signal = plant_summary.as_ref().map(|v| v.stopped_by_signal);
     let ending = match ending {
         Ending::Completed if stopped_by_signal != Some(false) && controller_exited_first => Ending::ControllerFailed(format!(
             "controller exited 0 before the plant reached its end; plant {}stopped",

@@ -91,23 +91,22 @@ impl Histogram {
         out
     }
 
-    /// Summary as JSON: count, mean, p50, p90, p99, p99.9, p99.99, max (µs) and a binned histogram.
-    pub fn to_json(&self, edges_us: &[f64]) -> serde_json::Value {
+    /// The summary's form: count, mean, p50, p90, p99, p99.9, p99.99, max (µs) and a binned
+    /// histogram with bins at `edges_us` (the last one open-ended).
+    pub fn distribution(&self, edges_us: &[f64]) -> recordings::plant_summary::Distribution {
         let us = |ns: u64| ns as f64 * 1e-3;
         let edges_ns: Vec<u64> = edges_us.iter().map(|e| (e * 1e3) as u64).collect();
-        serde_json::json!({
-            "count": self.count,
-            "mean_us": self.mean_ns() * 1e-3,
-            "p50_us": us(self.quantile_ns(0.5)),
-            "p90_us": us(self.quantile_ns(0.9)),
-            "p99_us": us(self.quantile_ns(0.99)),
-            "p999_us": us(self.quantile_ns(0.999)),
-            "p9999_us": us(self.quantile_ns(0.9999)),
-            "max_us": us(self.max_ns),
-            "bins": self.binned(&edges_ns).iter().map(|&(lo, hi, c)| {
-                serde_json::json!([us(lo), if hi == u64::MAX { serde_json::Value::Null } else { us(hi).into() }, c])
-            }).collect::<Vec<_>>(),
-        })
+        recordings::plant_summary::Distribution {
+            count: self.count,
+            mean_us: self.mean_ns() * 1e-3,
+            p50_us: us(self.quantile_ns(0.5)),
+            p90_us: us(self.quantile_ns(0.9)),
+            p99_us: us(self.quantile_ns(0.99)),
+            p999_us: us(self.quantile_ns(0.999)),
+            p9999_us: us(self.quantile_ns(0.9999)),
+            max_us: us(self.max_ns),
+            bins: self.binned(&edges_ns).iter().map(|&(lo, hi, c)| (us(lo), (hi != u64::MAX).then(|| us(hi)), c)).collect(),
+        }
     }
 }
 

@@ -67,7 +67,7 @@ fn main() {
     };
     match plant_sim::run::run(&opts) {
         // Both writes tolerate a closed pipe: a launcher killed with SIGKILL leaves its end closed.
-        Ok(summary) => rig_process::host::print_stdout(&format!("{}\n", summary.to_json(&a.rig))),
+        Ok(summary) => rig_process::host::print_stdout(&format!("{}\n", summary.to_summary(&a.rig).to_line())),
         Err(e) => {
             rig_process::host::print_stderr(&format!("plant-sim: error: {e:#}\n"));
             // A host problem (rig name taken, shared memory unusable) has its own status.

@@ -160,17 +160,18 @@ fn run(cpu: usize, period_ns: u64, latest: &Latest, stop: &AtomicBool) -> CpuRep
 }
 
 impl CpuReport {
-    pub fn to_json(&self, edges_us: &[f64]) -> serde_json::Value {
-        serde_json::json!({
-            "cpu": self.cpu,
-            "period_us": self.period_ns as f64 * 1e-3,
-            "pinned": self.pinned,
-            "sched_fifo": self.sched_fifo,
-            "latency": self.latency.to_json(edges_us),
-            "stalls": self.stalls,
+    /// The summary's form, its latency binned at `edges_us`.
+    pub fn report(&self, edges_us: &[f64]) -> recordings::plant_summary::CpuProbe {
+        recordings::plant_summary::CpuProbe {
+            cpu: self.cpu,
+            period_us: self.period_ns as f64 * 1e-3,
+            pinned: self.pinned,
+            sched_fifo: self.sched_fifo,
+            latency: self.latency.distribution(edges_us),
+            stalls: self.stalls,
             // [ms after the plant's first deadline, µs late]
-            "recent_stalls": self.recent_stalls.iter().map(|&(t, l)| serde_json::json!([t as f64 * 1e-6, l as f64 * 1e-3])).collect::<Vec<_>>(),
-        })
+            recent_stalls: self.recent_stalls.iter().map(|&(t, l)| (t as f64 * 1e-6, l as f64 * 1e-3)).collect(),
+        }
     }
 }
 

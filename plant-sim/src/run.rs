@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use recordings::PlantSummary;
 use scenarios::{Mode, Scenario};
 
 use crate::loop_rt::{LoopParams, PlantLoop};
@@ -97,54 +98,56 @@ pub struct RunSummary {
 }
 
 impl RunSummary {
-    pub fn to_json(&self, rig: &str) -> serde_json::Value {
+    /// The typed summary `plant-sim` prints as its last line ([`PlantSummary::to_line`]).
+    pub fn to_summary(&self, rig: &str) -> PlantSummary {
+        use recordings::plant_summary::{EgmCounters, HostProbe, LiveReport};
         let s = &self.stats;
         let us = |ns: u64| ns as f64 * 1e-3;
         let edges = [0.0, 10.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0, 300.0, 500.0, 1000.0, 2000.0];
-        serde_json::json!({
-            "rig": rig,
-            "mode": self.mode.name(),
-            "ticks": s.ticks,
-            "misses": s.misses,
-            "safe_stops": s.safe_stops,
-            "refusals": s.refusals,
-            "reflexes": s.reflexes,
-            "foreign_answers": s.foreign_answers,
-            "first_safe_stop_tick": s.first_safe_stop_tick,
-            "first_reflex_tick": s.first_reflex_tick,
-            "first_refusal_tick": s.first_refusal_tick,
-            "controller_ended": s.controller_ended,
-            "overruns": s.overruns,
-            "lost_wakeups": s.lost_wakeups,
-            "lost_wakeups_in_a_row": s.lost_wakeups_in_a_row,
-            "rt_p50_us": us(s.round_trip.quantile_ns(0.5)),
-            "rt_p99_us": us(s.round_trip.quantile_ns(0.99)),
-            "rt_max_us": us(s.round_trip.max_ns()),
-            "recording": self.recording.as_ref().map(|p| p.display().to_string()),
-            "drops": self.drops,
-            "recording_stopped_early": self.recording_stopped_early,
-            "live": self.live.map(|(addr, l)| serde_json::json!({"addr": addr.to_string(), "sent": l.sent, "dropped": l.dropped})),
-            "wall_s": s.wall_s,
-            "sim_s": s.sim_s,
-            "speed_factor": if s.active_wall_s > 0.0 { s.active_sim_s / s.active_wall_s } else { 0.0 },
-            "stopped_by_signal": s.stopped_by_signal,
-            "sched_fifo": self.rt.sched_fifo,
-            "mlockall": self.rt.mlockall,
-            "round_trip": s.round_trip.to_json(&edges),
-            "jitter": s.jitter.to_json(&edges),
-            "plant_compute": s.plant_compute.to_json(&edges),
-            "controller_compute": s.controller_compute.to_json(&edges),
-            "host_probe": self.probe.as_ref().map(|cpus| serde_json::json!({
-                "stall_threshold_us": crate::probe::HOST_STALL_NS as f64 * 1e-3,
-                "cpus": cpus.iter().map(|c| c.to_json(&edges)).collect::<Vec<_>>(),
-            })),
-            "egm": self.egm.map(|e| serde_json::json!({
-                "accepted": e.accepted,
-                "refused": e.refused,
-                "cycles": e.cycles,
-                "session_ended_tick": e.session_ended_tick,
-            })),
-        })
+        PlantSummary {
+            rig: rig.to_string(),
+            mode: self.mode,
+            ticks: s.ticks,
+            misses: s.misses,
+            safe_stops: s.safe_stops,
+            refusals: s.refusals,
+            reflexes: s.reflexes,
+            foreign_answers: s.foreign_answers,
+            first_safe_stop_tick: s.first_safe_stop_tick,
+            first_reflex_tick: s.first_reflex_tick,
+            first_refusal_tick: s.first_refusal_tick,
+            controller_ended: s.controller_ended,
+            overruns: s.overruns,
+            lost_wakeups: s.lost_wakeups,
+            lost_wakeups_in_a_row: s.lost_wakeups_in_a_row,
+            rt_p50_us: us(s.round_trip.quantile_ns(0.5)),
+            rt_p99_us: us(s.round_trip.quantile_ns(0.99)),
+            rt_max_us: us(s.round_trip.max_ns()),
+            recording: self.recording.as_ref().map(|p| p.display().to_string()),
+            drops: self.drops,
+            recording_stopped_early: self.recording_stopped_early.clone(),
+            live: self.live.map(|(addr, l)| LiveReport { addr: addr.to_string(), sent: l.sent, dropped: l.dropped }),
+            wall_s: s.wall_s,
+            sim_s: s.sim_s,
+            speed_factor: if s.active_wall_s > 0.0 { s.active_sim_s / s.active_wall_s } else { 0.0 },
+            stopped_by_signal: s.stopped_by_signal,
+            sched_fifo: self.rt.sched_fifo,
+            mlockall: self.rt.mlockall,
+            round_trip: s.round_trip.distribution(&edges),
+            jitter: s.jitter.distribution(&edges),
+            plant_compute: s.plant_compute.distribution(&edges),
+            controller_compute: s.controller_compute.distribution(&edges),
+            host_probe: self.probe.as_ref().map(|cpus| HostProbe {
+                stall_threshold_us: crate::probe::HOST_STALL_NS as f64 * 1e-3,
+                cpus: cpus.iter().map(|c| c.report(&edges)).collect(),
+            }),
+            egm: self.egm.map(|e| EgmCounters {
+                accepted: e.accepted,
+                refused: e.refused,
+                cycles: e.cycles,
+                session_ended_tick: e.session_ended_tick,
+            }),
+        }
     }
 }
 
@@ -191,27 +194,24 @@ pub fn open_recorder_with(
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    let mut metadata = vec![
-        ("rig".to_string(), about.rig.to_string()),
-        ("mode".to_string(), format!("{mode:?}").to_lowercase()),
-        ("scenario_path".to_string(), about.scenario_path.display().to_string()),
-        ("scenario_toml".to_string(), about.scenario_text.clone()),
-        ("contract_version".to_string(), messages::CONTRACT_VERSION.to_string()),
-        ("period_s".to_string(), l.period_s.to_string()),
-        ("substeps".to_string(), l.substeps.to_string()),
-        ("integrator".to_string(), l.integrator.name().to_string()),
-    ];
-    if let Some(t) = about.transport {
-        metadata.push(("transport".to_string(), t.to_string()));
-    }
-    if scenario.egm.enabled {
-        let lag = crate::egm::servo::ServoParams::from_scenario(scenario).lag_s();
-        metadata.push((crate::recording::EGM_METADATA_KEY.to_string(), lag.to_string()));
-    }
-    // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
-    if let Some(c) = physics.contact() {
-        metadata.push(("centreline_z_m".to_string(), format!("{:?}", c.centreline_z_m())));
-    }
+    let metadata = recordings::RunMetadata {
+        rig: about.rig.to_string(),
+        mode,
+        scenario: Some(recordings::run_metadata::ScenarioSource {
+            path: about.scenario_path.display().to_string(),
+            toml: about.scenario_text.clone(),
+        }),
+        period_s: l.period_s,
+        substeps: l.substeps,
+        integrator: l.integrator,
+        transport: about.transport.map(str::to_string),
+        egm: scenario
+            .egm
+            .enabled
+            .then(|| recordings::run_metadata::EgmRun { servo_lag_s: crate::egm::servo::ServoParams::from_scenario(scenario).lag_s() }),
+        // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
+        centreline_z_m: physics.contact().map(|c| c.centreline_z_m().to_vec()),
+    };
     let cfg = RecorderConfig {
         path: path.to_path_buf(),
         queue_capacity: match mode {

@@ -153,7 +153,8 @@ fn errors_in(errors: &[(f64, f64)], from_m: f64, to_m: f64) -> (Option<f64>, Opt
 /// The bond map of a windowed strip's recording (its scenario has `strip.window_mm` > 0, or its
 /// centre-line nodes move with the wheel); None for any other (the single model's fixed nodes have the report's rolled-length share).
 pub fn bond_map(rec: &Recording) -> Option<BondMap> {
-    let scenario: Option<scenarios::Scenario> = rec.rig_metadata("scenario_toml").and_then(|t| toml::from_str(t).ok());
+    let scenario: Option<scenarios::Scenario> =
+        rec.run_metadata().ok().and_then(|m| m.scenario).and_then(|src| toml::from_str(&src.toml).ok());
     // a chain of one window (the strip's own length) records fixed nodes, but no metadata z
     let windowed = scenario.as_ref().is_some_and(|s| s.strip.window_mm > 0.0);
     if !(rec.strip_nodes_move() || windowed && !rec.strip_centreline_z_m.is_empty()) {

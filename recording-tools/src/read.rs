@@ -9,7 +9,8 @@
 
 use mcap::records::{op, MessageHeader, Record};
 use messages::{ControllerDiagnostics, JointState, Wrench};
-use recordings::schema::{self, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
+use recordings::run_metadata::{MetadataError, RunMetadata, RECORD_NAME};
+use recordings::schema::{self, Channel, MESSAGE_ENCODING, SCHEMA_ENCODING};
 pub use recordings::schema::{EventRow, StripRow, TimingRow, TorqueRow};
 use recordings::EventKind;
 use std::collections::{BTreeMap, HashMap};
@@ -147,11 +148,11 @@ pub struct Recording {
 /// A schema record as read: name, encoding, text.
 type SchemaRec = (String, String, Vec<u8>);
 
-/// Schemas and channels seen so far; channel id -> index into [`CHANNELS`] (None: not ours).
+/// Schemas and channels seen so far; channel id -> which of ours (None: not ours).
 #[derive(Default)]
 struct Links {
     schemas: HashMap<u16, SchemaRec>,
-    channels: HashMap<u16, Option<usize>>,
+    channels: HashMap<u16, Option<Channel>>,
 }
 
 /// Why the record walk stopped: the bytes ran out (a cut) or a whole record is bad.
@@ -262,8 +263,9 @@ impl Recording {
                 None => Integrity::Complete,
             },
         };
-        if !rec.metadata.contains_key("rig") && rec.joint_state.is_empty() && rec.integrity == Integrity::Complete {
-            return Err(ReadError::Foreign { path: path.into(), topic: CHANNELS[0].topic, schema: CHANNELS[0].schema_name });
+        if !rec.metadata.contains_key(RECORD_NAME) && rec.joint_state.is_empty() && rec.integrity == Integrity::Complete {
+            let first = Channel::JointState.def();
+            return Err(ReadError::Foreign { path: path.into(), topic: first.topic, schema: first.schema_name });
         }
         Ok(rec)
     }
@@ -292,9 +294,9 @@ impl Recording {
                 links.schemas.insert(header.id, (header.name, header.encoding, data.into_owned()));
             }
             Record::Channel(ch) => {
-                let ours = CHANNELS.iter().position(|c| c.topic == ch.topic);
-                if let Some(idx) = ours {
-                    check_schema(path, &ch, links.schemas.get(&ch.schema_id), idx)?;
+                let ours = Channel::of_topic(&ch.topic);
+                if let Some(ours) = ours {
+                    check_schema(path, &ch, links.schemas.get(&ch.schema_id), ours)?;
                 }
                 links.channels.insert(ch.id, ours);
             }
@@ -313,16 +315,16 @@ impl Recording {
         Ok(Ok(()))
     }
 
-    fn push_message(&mut self, path: &Path, ch: usize, m: &MessageHeader, data: &[u8]) -> Result<(), ReadError> {
-        let bad = |source| ReadError::Decode { path: path.into(), topic: CHANNELS[ch].topic.into(), sequence: m.sequence, cause: source };
+    fn push_message(&mut self, path: &Path, ch: Channel, m: &MessageHeader, data: &[u8]) -> Result<(), ReadError> {
+        let bad = |source| ReadError::Decode { path: path.into(), topic: ch.def().topic.into(), sequence: m.sequence, cause: source };
         match ch {
-            0 => {
+            Channel::JointState => {
                 self.joint_state.push(schema::decode_joint_state(data).map_err(bad)?);
                 self.log_time_ns.push(m.log_time);
             }
-            1 => self.joint_torque.push(schema::decode_joint_torque(data).map_err(bad)?),
-            2 => self.wrench.push(schema::decode_wrench(data).map_err(bad)?),
-            3 => {
+            Channel::JointTorque => self.joint_torque.push(schema::decode_joint_torque(data).map_err(bad)?),
+            Channel::Wrench => self.wrench.push(schema::decode_wrench(data).map_err(bad)?),
+            Channel::Strip => {
                 let (row, z) = schema::decode_strip(data, true).map_err(bad)?;
                 let z = z.unwrap_or_default();
                 if self.strip_centreline_z_m.is_empty() {
@@ -335,17 +337,23 @@ impl Recording {
                 }
                 self.strip.push(row);
             }
-            4 => self.controller.push(schema::decode_controller(data).map_err(bad)?),
-            5 => self.timing.push(schema::decode_timing(data).map_err(bad)?),
-            6 => self.events.push(schema::decode_event(data, m.publish_time).map_err(bad)?),
-            _ => self.egm.push(schema::decode_egm(data).map_err(bad)?),
+            Channel::Controller => self.controller.push(schema::decode_controller(data).map_err(bad)?),
+            Channel::Timing => self.timing.push(schema::decode_timing(data).map_err(bad)?),
+            Channel::Events => self.events.push(schema::decode_event(data, m.publish_time).map_err(bad)?),
+            Channel::Egm => self.egm.push(schema::decode_egm(data).map_err(bad)?),
         }
         Ok(())
     }
 
-    /// A value of the `rig` metadata written at the start (rig, mode, scenario, ...).
+    /// A value of the `rig` metadata written at the start (rig, mode, scenario, ...), untyped:
+    /// [`Self::run_metadata`] reads the run's description whole.
     pub fn rig_metadata(&self, key: &str) -> Option<&str> {
-        self.metadata.get("rig")?.get(key).map(String::as_str)
+        self.metadata.get(RECORD_NAME)?.get(key).map(String::as_str)
+    }
+
+    /// The run's description as the plant wrote it; a required key missing is an error naming it.
+    pub fn run_metadata(&self) -> Result<RunMetadata, MetadataError> {
+        RunMetadata::from_entries(self.metadata.get(RECORD_NAME).ok_or(MetadataError::NoRecord)?)
     }
 
     /// The run's wall-clock start (Unix ns, metadata `rig/start_wall_ns`; 0 in files before
@@ -405,9 +413,10 @@ impl Recording {
         Ok(first..=last)
     }
 
-    /// z of the centre-line nodes, m (metadata `centreline_z_m`, else the first `/strip` row).
+    /// z of the centre-line nodes, m (metadata `centreline_z_m`, else the first `/strip` row, as
+    /// f32).
     pub fn centreline_z_m(&self) -> Vec<f64> {
-        if let Some(z) = self.rig_metadata("centreline_z_m").and_then(|j| schema::parse_f64_list(j).ok()) {
+        if let Some(z) = self.run_metadata().ok().and_then(|m| m.centreline_z_m) {
             return z;
         }
         self.strip_centreline_z_m.iter().map(|&z| z as f64).collect()
@@ -439,8 +448,8 @@ impl Recording {
     }
 }
 
-fn check_schema(path: &Path, ch: &mcap::records::Channel, schema: Option<&SchemaRec>, idx: usize) -> Result<(), ReadError> {
-    let def = &CHANNELS[idx];
+fn check_schema(path: &Path, ch: &mcap::records::Channel, schema: Option<&SchemaRec>, ours: Channel) -> Result<(), ReadError> {
+    let def = ours.def();
     let (name, encoding, data) = match schema {
         Some((n, e, d)) => (n.as_str(), e.as_str(), d.as_slice()),
         None => ("", "", &[][..]),

@@ -199,8 +199,10 @@ fn scenario_file(rec: &Recording, given: Option<&Path>, tmp_dir: &Path) -> anyho
     if let Some(p) = given {
         return Ok(p.to_path_buf());
     }
-    let text = rec
-        .rig_metadata("scenario_toml")
+    let run = rec.run_metadata().with_context(|| format!("{}: pass --scenario FILE", rec.path.display()))?;
+    let text = run
+        .scenario
+        .map(|s| s.toml)
         .with_context(|| format!("{} stores no scenario (metadata rig/scenario_toml); pass --scenario FILE", rec.path.display()))?;
     std::fs::create_dir_all(tmp_dir).with_context(|| format!("creating {}", tmp_dir.display()))?;
     let p = tmp_dir.join("scenario.toml");
@@ -257,8 +259,8 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<ReplayOutcome> {
         tracing::info!(rig = %rig, controller = %exe.display(), "replay: controller started");
     } else if let Some(s) = args.scenario.as_deref() {
         blend = blend_ticks(s, rec.period_s())?;
-    } else if let Some(text) = rec.rig_metadata("scenario_toml") {
-        if let Ok(s) = scenarios::Scenario::from_toml_str(text, Path::new("<recording>")) {
+    } else if let Some(src) = rec.run_metadata().ok().and_then(|m| m.scenario) {
+        if let Ok(s) = scenarios::Scenario::from_toml_str(&src.toml, Path::new("<recording>")) {
             blend = (s.loop_.takeover_blend_s / rec.period_s().max(1e-9)).round() as u32;
         }
     }

@@ -174,7 +174,8 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         .collect();
     let plant = rec.timing.iter().map(|t| t.timing.plant_compute_ns as f64 * 1e-3).collect();
     // Misses and success rate mean something against a clock: real-time recordings only.
-    let attribution = (rec.rig_metadata("mode") == Some("realtime")).then(|| crate::attribution::attribute(&rec.timing));
+    let realtime = rec.run_metadata().is_ok_and(|m| m.mode == scenarios::Mode::Realtime);
+    let attribution = realtime.then(|| crate::attribution::attribute(&rec.timing));
     let by_cause = attribution
         .as_ref()
         .filter(|a| a.stamped)

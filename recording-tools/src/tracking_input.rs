@@ -28,6 +28,6 @@ pub fn tracking_ticks(rec: &Recording) -> Vec<TrackingTick> {
 
 /// The constant force set-point of an EGM run's scenario (`[egm] enabled`, no force table), N.
 fn egm_force_ref(rec: &Recording) -> Option<f64> {
-    let s: scenarios::Scenario = toml::from_str(rec.rig_metadata("scenario_toml")?).ok()?;
+    let s: scenarios::Scenario = toml::from_str(&rec.run_metadata().ok()?.scenario?.toml).ok()?;
     (s.egm.enabled && s.trajectory.force_ref_along_z.is_empty()).then_some(s.trajectory.force_ref_n)
 }

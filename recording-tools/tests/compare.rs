@@ -8,9 +8,7 @@ use std::path::PathBuf;
 
 fn record(dir: &std::path::Path, name: &str, run: &SyntheticRun) -> PathBuf {
     let path = dir.join(name).join("run.mcap");
-    let mut cfg = RecorderConfig::new(&path);
-    cfg.metadata = run.metadata();
-    run.record(cfg).unwrap();
+    run.record(RecorderConfig::new(&path, run.metadata())).unwrap();
     path
 }
 

@@ -26,9 +26,8 @@ fn a_full_disk_mid_run_stops_the_recording_and_keeps_the_complete_chunks() {
 /// Records 4000 synthetic ticks into `path` with `tuning`; returns the summary.
 fn record(path: &std::path::Path, tuning: RecorderTuning) -> RecordingSummary {
     let run = SyntheticRun { ticks: 4000, ..Default::default() };
-    let mut cfg = RecorderConfig::new(path);
+    let mut cfg = RecorderConfig::new(path, run.metadata());
     cfg.chunk_size_bytes = 64 << 10;
-    cfg.metadata = run.metadata();
     let mut rec = Recorder::start_with(cfg, tuning).unwrap();
     let mut accepted = 0u64;
     for k in 0..run.ticks {

@@ -22,9 +22,8 @@ fn tmp(name: &str) -> PathBuf {
 fn complete_recording(name: &str, ticks: u64) -> (PathBuf, Vec<u8>) {
     let run = SyntheticRun { ticks, ..Default::default() };
     let path = tmp(name);
-    let mut cfg = RecorderConfig::new(&path);
+    let mut cfg = RecorderConfig::new(&path, run.metadata());
     cfg.chunk_size_bytes = 64 << 10;
-    cfg.metadata = run.metadata();
     assert!(run.record(cfg).unwrap().finalised);
     let bytes = std::fs::read(&path).unwrap();
     (path, bytes)

@@ -11,9 +11,7 @@ fn report_on_a_known_recording_gives_the_known_numbers() {
     let run = SyntheticRun::default();
     let dir = std::env::temp_dir().join(format!("recordings-report-{}", std::process::id()));
     let path = dir.join("known.mcap");
-    let mut cfg = RecorderConfig::new(&path);
-    cfg.metadata = run.metadata();
-    run.record(cfg).unwrap();
+    run.record(RecorderConfig::new(&path, run.metadata())).unwrap();
     let rec = Recording::open_complete(&path).unwrap();
     let n = report::numbers(&rec);
 
@@ -79,9 +77,7 @@ fn report_writes_text_json_and_every_figure() {
     let run = SyntheticRun { ticks: 2600, ..Default::default() };
     let dir = std::env::temp_dir().join(format!("recordings-report-files-{}", std::process::id()));
     let path = dir.join("figs.mcap");
-    let mut cfg = RecorderConfig::new(&path);
-    cfg.metadata = run.metadata();
-    run.record(cfg).unwrap();
+    run.record(RecorderConfig::new(&path, run.metadata())).unwrap();
     let rec = Recording::open_complete(&path).unwrap();
     let out = dir.join("report");
     let (n, files) = report::write_report(&rec, &out, &[]).unwrap();

@@ -13,9 +13,8 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn small_chunks(path: &PathBuf, run: &SyntheticRun) -> RecorderConfig {
-    let mut cfg = RecorderConfig::new(path);
+    let mut cfg = RecorderConfig::new(path, run.metadata());
     cfg.chunk_size_bytes = 64 << 10;
-    cfg.metadata = run.metadata();
     cfg
 }
 
@@ -38,6 +37,7 @@ fn every_tick_on_every_channel_reads_back_exactly() {
     assert_eq!(rec.dropped(), 0);
     assert_eq!(rec.summary_metadata("ticks_written"), Some(run.ticks.to_string().as_str()));
     assert_eq!(rec.rig_metadata("rig"), Some("synthetic"));
+    assert_eq!(rec.run_metadata().unwrap(), run.metadata(), "the run's description reads back as written");
     assert_eq!(rec.centreline_z_m(), run.centreline_z_m());
     for k in [0u64, 1, 777, run.ticks - 1] {
         let want = run.tick(k);
@@ -164,7 +164,9 @@ fn a_disk_running_low_ends_the_recording_cleanly_and_the_loop_never_blocks() {
 #[test]
 fn an_unwritable_target_is_a_clear_start_error() {
     // /dev/full answers every write with ENOSPC.
-    let err = Recorder::start(RecorderConfig::new("/dev/full")).err().expect("start must fail");
+    let err = Recorder::start(RecorderConfig::new("/dev/full", recordings::synthetic::SyntheticRun::default().metadata()))
+        .err()
+        .expect("start must fail");
     let msg = err.to_string();
     assert!(msg.contains("/dev/full") && msg.to_lowercase().contains("no space"), "{msg}");
 }

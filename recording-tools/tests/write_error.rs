@@ -15,9 +15,8 @@ fn a_write_error_mid_run_stops_the_recording_and_keeps_the_complete_chunks() {
     let path = dir.join("limited.mcap");
     let run = SyntheticRun { ticks: 4000, ..Default::default() };
     let config = |path: &std::path::Path| {
-        let mut cfg = RecorderConfig::new(path);
+        let mut cfg = RecorderConfig::new(path, run.metadata());
         cfg.chunk_size_bytes = 64 << 10;
-        cfg.metadata = run.metadata();
         cfg
     };
     // The limit falls 64 bytes past the start of a chunk (the last one starting before 400 KiB

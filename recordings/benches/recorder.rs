@@ -33,8 +33,7 @@ fn paced_run(n_centreline: usize, seconds: f64) {
     let run = SyntheticRun { ticks: (seconds * 1000.0) as u64, n_centreline, roll_ticks: (seconds * 600.0) as u64, ..Default::default() };
     let dir = std::env::temp_dir().join(format!("recordings-bench-{}", std::process::id()));
     let path = dir.join(format!("bench-{n_centreline}.mcap"));
-    let mut cfg = RecorderConfig::new(&path);
-    cfg.metadata = run.metadata();
+    let mut cfg = RecorderConfig::new(&path, run.metadata());
     if let Ok(q) = std::env::var("QUEUE") {
         cfg.queue_capacity = q.parse().unwrap();
     }
@@ -114,9 +113,8 @@ fn criterion_benches(c: &mut Criterion) {
     // record_tick back to back, waiting for queue space: this measures the WRITER's throughput
     // (encode + zstd + write per tick), i.e. how much faster than 1 kHz it can keep up.
     let dir = std::env::temp_dir().join(format!("recordings-bench-c-{}", std::process::id()));
-    let mut cfg = RecorderConfig::new(dir.join("c.mcap"));
+    let mut cfg = RecorderConfig::new(dir.join("c.mcap"), run.metadata());
     cfg.queue_capacity = 1 << 16;
-    cfg.metadata = run.metadata();
     let mut rec = Recorder::start(cfg).unwrap();
     c.bench_function("writer throughput: one tick end to end (record_tick back to back)", |b| {
         b.iter(|| {

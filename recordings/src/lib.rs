@@ -14,13 +14,17 @@
 
 pub mod cdr;
 pub mod live;
+pub mod plant_summary;
+pub mod run_metadata;
 pub mod scene;
 pub mod schema;
 pub mod synthetic;
 mod writer;
 
 pub use live::{LiveConfig, LiveSummary};
-pub use writer::{Recorder, RecorderConfig, RecorderError, RecorderTuning, RecordingSummary, EGM_METADATA_KEY};
+pub use plant_summary::PlantSummary;
+pub use run_metadata::{RunMetadata, EGM_METADATA_KEY};
+pub use writer::{Recorder, RecorderConfig, RecorderError, RecorderTuning, RecordingSummary};
 
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, DOF};
 

@@ -223,8 +223,91 @@ float64 servo_lag               # s, the motion controller's lag from reference 
 ",
 };
 
-/// All channels, in the order the writer registers them.
+/// All channels, in the order the writer registers them; [`Channel`] names each by its index.
 pub const CHANNELS: [ChannelDef; 8] = [JOINT_STATE, JOINT_TORQUE, WRENCH, STRIP, CONTROLLER, TIMING, EVENTS, EGM];
+
+/// The ROS 2 channels by name: `Channel::Events.index()` instead of `CHANNELS[6]`. The value is
+/// the index in [`CHANNELS`] (the writer's registration order, and the live view's numbering).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Channel {
+    JointState,
+    JointTorque,
+    Wrench,
+    Strip,
+    Controller,
+    Timing,
+    Events,
+    /// Only in EGM runs; last, so the others keep their index without it.
+    Egm,
+}
+
+impl Channel {
+    /// Every channel, in [`CHANNELS`] order.
+    pub const ALL: [Channel; 8] = [
+        Channel::JointState,
+        Channel::JointTorque,
+        Channel::Wrench,
+        Channel::Strip,
+        Channel::Controller,
+        Channel::Timing,
+        Channel::Events,
+        Channel::Egm,
+    ];
+
+    /// Its index in [`CHANNELS`].
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Its topic, schema name and schema.
+    pub const fn def(self) -> &'static ChannelDef {
+        &CHANNELS[self as usize]
+    }
+
+    /// The channel at `index` in [`CHANNELS`], None past the end.
+    pub fn at(index: usize) -> Option<Channel> {
+        Self::ALL.get(index).copied()
+    }
+
+    /// The channel with this topic, None: not one of ours.
+    pub fn of_topic(topic: &str) -> Option<Channel> {
+        Self::ALL.into_iter().find(|c| c.def().topic == topic)
+    }
+}
+
+// Each name is at its own index with its own topic (a reordering of CHANNELS fails the build).
+const _: () = {
+    const fn same(a: &str, b: &str) -> bool {
+        let (a, b) = (a.as_bytes(), b.as_bytes());
+        if a.len() != b.len() {
+            return false;
+        }
+        let mut i = 0;
+        while i < a.len() {
+            if a[i] != b[i] {
+                return false;
+            }
+            i += 1;
+        }
+        true
+    }
+    let topics = [
+        (Channel::JointState, JOINT_STATE.topic),
+        (Channel::JointTorque, JOINT_TORQUE.topic),
+        (Channel::Wrench, WRENCH.topic),
+        (Channel::Strip, STRIP.topic),
+        (Channel::Controller, CONTROLLER.topic),
+        (Channel::Timing, TIMING.topic),
+        (Channel::Events, EVENTS.topic),
+        (Channel::Egm, EGM.topic),
+    ];
+    assert!(topics.len() == CHANNELS.len() && Channel::ALL.len() == CHANNELS.len());
+    let mut i = 0;
+    while i < topics.len() {
+        assert!(Channel::ALL[i] as usize == i && topics[i].0 as usize == i && same(topics[i].0.def().topic, topics[i].1));
+        i += 1;
+    }
+};
 
 // ---------------------------------------------------------------------------------------------
 // Encoders (writer thread).
@@ -648,13 +731,13 @@ pub fn decode_event(msg: &[u8], wall_ns: u64) -> Result<EventRow, CdrError> {
     Ok(EventRow { tick, sim_time_s, kind, kind_name: r.string("kind_name")?, text: r.string("text")?, wall_ns })
 }
 
-/// Parses the metadata value `centreline_z_m` (a JSON array of m) for the `/strip` channel.
-pub fn parse_centreline_z(json: &str) -> Result<Vec<f32>, String> {
-    let z = parse_f64_list(json).map_err(|e| format!("metadata centreline_z_m is not a JSON array of numbers: {e}"))?;
+/// The metadata's `centreline_z_m` (m) as the `/strip` channel carries it (f32), checked against
+/// [`MAX_CENTRELINE`].
+pub fn centreline_z_f32(z: &[f64]) -> Result<Vec<f32>, String> {
     if z.len() > MAX_CENTRELINE {
         return Err(format!("metadata centreline_z_m has {} entries, at most {MAX_CENTRELINE} allowed", z.len()));
     }
-    Ok(z.into_iter().map(|v| v as f32).collect())
+    Ok(z.iter().map(|&v| v as f32).collect())
 }
 
 /// Parses a flat JSON array of numbers exactly (Rust's float parsing is correctly rounded, so a
@@ -880,7 +963,7 @@ mod tests {
 
     #[test]
     fn centreline_z_metadata_is_checked() {
-        assert_eq!(parse_centreline_z("[0.001, 0.0015]").unwrap(), vec![0.001f32, 0.0015]);
-        assert!(parse_centreline_z("{\"a\":1}").unwrap_err().contains("centreline_z_m"));
+        assert_eq!(centreline_z_f32(&[0.001, 0.0015]).unwrap(), vec![0.001f32, 0.0015]);
+        assert!(centreline_z_f32(&[0.0; MAX_CENTRELINE + 1]).unwrap_err().contains("centreline_z_m"));
     }
 }

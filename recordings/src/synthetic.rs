@@ -59,13 +59,19 @@ impl SyntheticRun {
         (0..n).map(|i| self.strip_length_m * i as f64 / (n - 1).max(1) as f64).collect()
     }
 
-    /// Metadata as the plant would pass it.
-    pub fn metadata(&self) -> Vec<(String, String)> {
-        vec![
-            ("rig".into(), "synthetic".into()),
-            ("mode".into(), "lockstep".into()),
-            ("centreline_z_m".into(), serde_json::to_string(&self.centreline_z_m()).unwrap()),
-        ]
+    /// Metadata as the plant would pass it (no scenario: the run is made here, not from one).
+    pub fn metadata(&self) -> crate::RunMetadata {
+        crate::RunMetadata {
+            rig: "synthetic".into(),
+            mode: scenarios::Mode::Lockstep,
+            scenario: None,
+            period_s: self.period_s,
+            substeps: 1,
+            integrator: scenarios::Integrator::default(),
+            transport: None,
+            egm: None,
+            centreline_z_m: Some(self.centreline_z_m()),
+        }
     }
 
     /// Wheel position at tick k (cosine velocity profile while rolling).

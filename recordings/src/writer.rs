@@ -19,7 +19,8 @@
 //! ([`crate::live`]): a bounded queue to a thread of its own that serves Foxglove clients.
 
 use crate::live::{LiveChannel, LiveConfig, LiveError, LiveSummary, LiveView};
-use crate::schema::{self, TickHead, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
+use crate::run_metadata::RunMetadata;
+use crate::schema::{self, Channel, TickHead, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::{error_chain, sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, MAX_CENTRELINE, RECORDING_FORMAT_VERSION};
 use mcap::records::{op, MessageHeader, Metadata};
 use std::collections::BTreeMap;
@@ -42,9 +43,10 @@ pub struct RecorderConfig {
     pub queue_capacity: usize,
     /// Uncompressed bytes per chunk: bounds what a SIGKILL loses (about 0.6 s at 1 kHz for 1 MiB).
     pub chunk_size_bytes: u64,
-    /// Written once as MCAP metadata `rig`: rig name, mode, scenario TOML text, `centreline_z_m`
-    /// (JSON array of the centre-line nodes' z in m, also repeated in every `/strip` message).
-    pub metadata: Vec<(String, String)>,
+    /// Written once as MCAP metadata `rig` (with the writer's own keys: start time, format and
+    /// contract version): rig name, mode, scenario, EGM or not, the centre-line nodes' z (also
+    /// repeated in every `/strip` message).
+    pub metadata: RunMetadata,
     /// Serve the channels live over the Foxglove WebSocket protocol as they are written.
     pub live: Option<LiveConfig>,
     /// What Foxglove draws (URDF, transforms, strip scene; [`crate::scene`]); None: only the
@@ -58,12 +60,12 @@ impl RecorderConfig {
     pub const DEFAULT_QUEUE_CAPACITY: usize = 4096;
     pub const DEFAULT_CHUNK_SIZE_BYTES: u64 = 1 << 20;
 
-    pub fn new(path: impl Into<PathBuf>) -> Self {
+    pub fn new(path: impl Into<PathBuf>, metadata: RunMetadata) -> Self {
         Self {
             path: path.into(),
             queue_capacity: Self::DEFAULT_QUEUE_CAPACITY,
             chunk_size_bytes: Self::DEFAULT_CHUNK_SIZE_BYTES,
-            metadata: Vec::new(),
+            metadata,
             live: None,
             scene: None,
             period_s: 1e-3,
@@ -138,10 +140,6 @@ pub struct RecordingSummary {
     pub live: Option<LiveSummary>,
 }
 
-/// The metadata key of an EGM run (its value: the motion controller's lag, s); with it the
-/// recording has the `/egm` channel.
-pub const EGM_METADATA_KEY: &str = "egm_servo_lag_s";
-
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Kind {
     Tick,
@@ -189,6 +187,10 @@ pub struct Recorder {
 }
 
 type McapFile = mcap::Writer<BufWriter<SlicedFile>>;
+
+/// Bytes an MCAP message record adds to its payload: opcode (1), record length (8), channel id
+/// (2), sequence (4), log time (8), publish time (8). Counted toward `chunk_size_bytes`.
+const MESSAGE_RECORD_HEADER_BYTES: u64 = 1 + 8 + 2 + 4 + 8 + 8;
 
 /// Largest single `write(2)` of a recording, bytes.
 const WRITE_SLICE_BYTES: usize = 16 * 1024;
@@ -252,20 +254,20 @@ impl Recorder {
         if cfg.chunk_size_bytes == 0 {
             return Err(config_err("chunk_size_bytes must be at least 1".into()));
         }
-        let centreline_z = match cfg.metadata.iter().find(|(k, _)| k == "centreline_z_m") {
-            Some((_, v)) => schema::parse_centreline_z(v).map_err(config_err)?,
+        let centreline_z = match &cfg.metadata.centreline_z_m {
+            Some(z) => schema::centreline_z_f32(z).map_err(config_err)?,
             None => Vec::new(),
         };
         let fox_defs = FoxgloveChannels::defs(cfg.scene.as_ref());
-        // `/egm` only in EGM runs (the plant names its servo lag in the metadata): a torque run's
-        // file and live view stay as they were. `/egm` is the last of CHANNELS, so the others keep
-        // their index in both.
-        let has_egm = cfg.metadata.iter().any(|(k, _)| k == EGM_METADATA_KEY);
-        let ros_channels = if has_egm { CHANNELS.len() } else { CHANNELS.len() - 1 };
+        // `/egm` only in EGM runs: a torque run's file and live view stay as they were. `/egm` is
+        // the last of CHANNELS, so the others keep their index in both.
+        const _: () = assert!(Channel::Egm.index() == CHANNELS.len() - 1);
+        let has_egm = cfg.metadata.egm.is_some();
+        let ros_channels = if has_egm { CHANNELS.len() } else { Channel::Egm.index() };
         // The live view first: an address it cannot serve on ends the start before a file exists.
         let live = match &cfg.live {
             Some(live_cfg) => {
-                let name = cfg.metadata.iter().find(|(k, _)| k == "rig").map_or("rig", |(_, v)| v.as_str());
+                let name = &cfg.metadata.rig;
                 let ros = CHANNELS[..ros_channels].iter().map(|ch| LiveChannel {
                     topic: ch.topic,
                     schema_name: ch.schema_name,
@@ -307,21 +309,20 @@ impl Recorder {
             .create(BufWriter::with_capacity(WRITE_SLICE_BYTES, SlicedFile(file, tally.clone())))
             .map_err(mcap_err)?;
         let mut channel_ids = [0u16; CHANNELS.len()];
-        // `/egm` only in EGM runs (the plant names its servo lag in the metadata): a torque run's
-        // file is as before.
-        for (id, ch) in channel_ids.iter_mut().zip(CHANNELS.iter()).filter(|(_, ch)| has_egm || ch.topic != schema::EGM.topic) {
+        // `/egm` only in EGM runs: a torque run's file is as before.
+        for (id, ch) in channel_ids.iter_mut().zip(CHANNELS.iter()).filter(|(_, ch)| has_egm || ch.topic != Channel::Egm.def().topic) {
             let schema_id = mcap.add_schema(ch.schema_name, SCHEMA_ENCODING, ch.schema_text.as_bytes()).map_err(mcap_err)?;
             *id = mcap.add_channel(schema_id, ch.topic, MESSAGE_ENCODING, &BTreeMap::new()).map_err(mcap_err)?;
         }
         let fox = FoxgloveChannels::register(&mut mcap, &fox_defs, ros_channels).map_err(mcap_err)?;
         // The run's wall-clock start, taken once: log time = start + simulated time.
         let start_ns = wall_clock_ns();
-        let mut meta: BTreeMap<String, String> = cfg.metadata.iter().cloned().collect();
+        let mut meta = cfg.metadata.to_entries();
         meta.insert("start_wall_ns".into(), start_ns.to_string());
         meta.insert("recording_format".into(), RECORDING_FORMAT_VERSION.to_string());
         meta.insert("contract_version".into(), messages::CONTRACT_VERSION.to_string());
         meta.insert("created_wall_ns".into(), wall_clock_ns().to_string());
-        mcap.write_metadata(&Metadata { name: "rig".into(), metadata: meta }).map_err(mcap_err)?;
+        mcap.write_metadata(&Metadata { name: crate::run_metadata::RECORD_NAME.into(), metadata: meta }).map_err(mcap_err)?;
         let mut robot_description = Vec::new();
         if let (Some(scene), Some(ch)) = (cfg.scene.as_ref(), fox.robot_description) {
             let text = robot::urdf::urdf(&scene.tool);
@@ -446,7 +447,7 @@ impl Recorder {
         self.push_small(Kind::Event, |slot| unsafe { std::ptr::addr_of_mut!((*slot).small).write(MaybeUninit::new(Small { event: *e })) })
     }
 
-    /// Queues one EGM cycle (`/egm`; written only when the metadata has [`EGM_METADATA_KEY`]).
+    /// Queues one EGM cycle (`/egm`; written only in an EGM run: [`RunMetadata::egm`]).
     /// Wait-free; returns false (and counts a drop) if the queue is full.
     #[inline]
     pub fn record_egm(&mut self, e: &crate::EgmRecord) -> bool {
@@ -705,29 +706,29 @@ impl WriterThread {
         let Self { mcap, channel_ids, buf, centreline_z, moving_z, pressure, bytes_since_flush, live, .. } = self;
         let centreline_z = if r.strip.centreline_dz_m > 0.0 { &*moving_z } else { &*centreline_z };
         let mcap = mcap.as_mut().expect("checked by handle");
-        let mut put = |ch: usize, buf: &Vec<u8>| -> Result<(), mcap::McapError> {
-            *bytes_since_flush += buf.len() as u64 + 31; // + message record header
-            let header = MessageHeader { channel_id: channel_ids[ch], sequence: r.state.tick as u32, log_time, publish_time };
+        let mut put = |ch: Channel, buf: &Vec<u8>| -> Result<(), mcap::McapError> {
+            *bytes_since_flush += buf.len() as u64 + MESSAGE_RECORD_HEADER_BYTES;
+            let header = MessageHeader { channel_id: channel_ids[ch.index()], sequence: r.state.tick as u32, log_time, publish_time };
             mcap.write_to_known_channel(&header, buf)?;
             if let Some(live) = live.as_mut() {
-                live.offer(ch, log_time, buf, true);
+                live.offer(ch.index(), log_time, buf, true);
             }
             Ok(())
         };
         schema::encode_joint_state(buf, r);
-        put(0, buf)?;
+        put(Channel::JointState, buf)?;
         schema::encode_joint_torque(buf, r);
-        put(1, buf)?;
+        put(Channel::JointTorque, buf)?;
         schema::encode_wrench(buf, r);
-        put(2, buf)?;
+        put(Channel::Wrench, buf)?;
         schema::encode_strip(buf, r, pressure, centreline_z);
-        put(3, buf)?;
+        put(Channel::Strip, buf)?;
         if r.has_diag {
             schema::encode_controller(buf, r);
-            put(4, buf)?;
+            put(Channel::Controller, buf)?;
         }
         schema::encode_timing(buf, r, dropped);
-        put(5, buf)?;
+        put(Channel::Timing, buf)?;
         self.write_scene(r, log_time)?;
         self.ticks_written += 1;
         self.last_tick = r.state.tick;
@@ -740,33 +741,34 @@ impl WriterThread {
             return Ok(());
         }
         schema::encode_egm(&mut self.buf, e);
-        self.bytes_since_flush += self.buf.len() as u64 + 31;
+        self.bytes_since_flush += self.buf.len() as u64 + MESSAGE_RECORD_HEADER_BYTES;
         // The timeline of every channel: the run's start + simulated time (publish = log).
         let log_time = self.start_ns + sim_time_ns(e.sim_time_s);
-        let header = MessageHeader { channel_id: self.channel_ids[7], sequence: e.tick as u32, log_time, publish_time: log_time };
+        let header =
+            MessageHeader { channel_id: self.channel_ids[Channel::Egm.index()], sequence: e.tick as u32, log_time, publish_time: log_time };
         self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
         if let Some(live) = self.live.as_mut() {
-            live.offer(7, log_time, &self.buf, true);
+            live.offer(Channel::Egm.index(), log_time, &self.buf, true);
         }
         Ok(())
     }
 
     fn write_event(&mut self, e: &EventRecord) -> Result<(), mcap::McapError> {
         schema::encode_event(&mut self.buf, e);
-        self.bytes_since_flush += self.buf.len() as u64 + 31;
+        self.bytes_since_flush += self.buf.len() as u64 + MESSAGE_RECORD_HEADER_BYTES;
         let header = MessageHeader {
-            channel_id: self.channel_ids[6],
+            channel_id: self.channel_ids[Channel::Events.index()],
             sequence: e.tick as u32,
             log_time: self.start_ns + sim_time_ns(e.sim_time_s),
             publish_time: self.start_ns + sim_time_ns(e.sim_time_s),
         };
         self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
         if let Some(live) = self.live.as_mut() {
-            live.offer(6, header.log_time, &self.buf, false);
+            live.offer(Channel::Events.index(), header.log_time, &self.buf, false);
         }
         if let Some(ch) = self.fox.log {
             crate::scene::encode_into(&crate::scene::log_message(e, header.log_time), &mut self.buf);
-            self.bytes_since_flush += self.buf.len() as u64 + 31;
+            self.bytes_since_flush += self.buf.len() as u64 + MESSAGE_RECORD_HEADER_BYTES;
             let header = MessageHeader { channel_id: ch.id, ..header };
             self.mcap.as_mut().expect("checked by handle").write_to_known_channel(&header, &self.buf)?;
             if let Some(live) = self.live.as_mut() {
@@ -804,7 +806,7 @@ impl WriterThread {
         let header = |channel_id| MessageHeader { channel_id, sequence: r.state.tick as u32, log_time, publish_time: log_time };
         let mcap = mcap.as_mut().expect("checked by handle");
         let mut put = |ch: FoxChannel, bytes: &[u8]| -> Result<(), mcap::McapError> {
-            *bytes_since_flush += bytes.len() as u64 + 31;
+            *bytes_since_flush += bytes.len() as u64 + MESSAGE_RECORD_HEADER_BYTES;
             mcap.write_to_known_channel(&header(ch.id), bytes)?;
             if let Some(live) = live.as_mut() {
                 live.offer(ch.live, log_time, bytes, true);
@@ -986,7 +988,7 @@ impl WriterThread {
         schema::encode_event(&mut self.buf, e);
         let mut out = Vec::new();
         let mut body = Vec::new();
-        body.extend_from_slice(&self.channel_ids[6].to_le_bytes());
+        body.extend_from_slice(&self.channel_ids[Channel::Events.index()].to_le_bytes());
         body.extend_from_slice(&(e.tick as u32).to_le_bytes());
         let ns = self.start_ns + sim_time_ns(e.sim_time_s);
         body.extend_from_slice(&ns.to_le_bytes());

@@ -168,13 +168,18 @@ pub fn start_controller(name: &str, bin_name: &str, rig: &str, scenario: &Path, 
     Daemon::start(name, &bin(bin_name), &args, dir)
 }
 
-/// The plant's one-line JSON summary from its stdout.
+/// The plant's one-line JSON summary from its stdout, read as a [`recordings::PlantSummary`]
+/// (every field there) and handed back as JSON to index by field name.
 pub fn plant_summary(d: &Daemon) -> serde_json::Value {
     let out = d.stdout();
-    out.lines()
+    let line = out
+        .lines()
         .rev()
-        .find_map(|l| serde_json::from_str(l).ok())
-        .unwrap_or_else(|| panic!("no JSON summary on the plant's stdout:\n{out}\nstderr:\n{}", d.stderr()))
+        .find_map(|l| serde_json::from_str::<serde_json::Value>(l).ok().filter(|v| v.is_object()))
+        .unwrap_or_else(|| panic!("no JSON summary on the plant's stdout:\n{out}\nstderr:\n{}", d.stderr()));
+    let typed = recordings::PlantSummary::from_value(line.clone()).unwrap_or_else(|e| panic!("{e}:\n{line}"));
+    assert_eq!(typed.to_value(), line, "the summary line holds what the type holds, no more");
+    line
 }
 
 /// Wait until `needle` appears in a daemon's log (stderr), e.g. the plant's "connected" line.

@@ -56,6 +56,8 @@ impl EgmRun {
         assert!(self.client.expect_exit(Duration::from_secs(20)).success(), "EGM client: {}", self.client.stderr());
         let summary = plant_summary(&self.plant);
         let rec = Recording::open_complete(self.rig.recording()).expect("complete recording");
+        let egm = rec.run_metadata().expect("the run's description").egm.expect("an EGM run's metadata says so");
+        assert!(egm.servo_lag_s > 0.0, "{egm:?}");
         let log: Vec<serde_json::Value> = serde_json::from_str(&std::fs::read_to_string(&self.client_log).unwrap()).unwrap();
         (self.rig, summary, rec, log)
     }

@@ -212,7 +212,8 @@ fn the_default_scenario_on_one_window_of_the_chain_tracks_as_the_single_model_wi
     let rec_b = run("chain", &windowed_path);
     // the single model names its fixed centre-line nodes in the metadata; the chain records them
     // per tick in strip coordinates
-    assert!(rec_a.rig_metadata("centreline_z_m").is_some() && rec_b.rig_metadata("centreline_z_m").is_none(), "the chain ran");
+    let (meta_a, meta_b) = (rec_a.run_metadata().unwrap(), rec_b.run_metadata().unwrap());
+    assert!(meta_a.centreline_z_m.is_some() && meta_b.centreline_z_m.is_none(), "the chain ran");
     let (a, b) = (figures(&rec_a), figures(&rec_b));
     let names = ["force error max |e|", "force error RMS", "force error mean", "mean |bottom force|", "max |bottom force|"];
     for ((name, x), y) in names.iter().zip(a).zip(b) {

@@ -45,7 +45,7 @@ fn a_sweep_over_bump_heights_is_the_runs_it_stands_for_and_the_bump_superposes()
     for n in 0..3 {
         let case = out.join(format!("case-{n:02}"));
         let swept = Recording::open_complete(case.join("run.mcap")).unwrap();
-        assert_eq!(swept.rig_metadata("transport"), Some("in-process"), "case {n}");
+        assert_eq!(swept.run_metadata().unwrap().transport.as_deref(), Some("in-process"), "case {n}");
         let again = dir.join(format!("daemons-{n:02}"));
         let mut run = Daemon::start(
             "rig run",
@@ -55,7 +55,7 @@ fn a_sweep_over_bump_heights_is_the_runs_it_stands_for_and_the_bump_superposes()
         );
         assert!(run.expect_exit(LONG).success(), "{}", run.stderr());
         let daemons = Recording::open_complete(again.join("run.mcap")).unwrap();
-        assert_eq!(daemons.rig_metadata("transport"), None, "case {n}: the daemons' run");
+        assert_eq!(daemons.run_metadata().unwrap().transport, None, "case {n}: the daemons' run");
         assert_eq!(physics_digest(&swept), physics_digest(&daemons), "case {n}: in-process sweep case != daemons' lockstep run");
     }
 

@@ -66,7 +66,7 @@ fn in_process_runs_are_bit_identical_to_the_pinned_lockstep_digests() {
     for (name, _) in EXPECTED {
         let rec = lockstep(name, &["--in-process"]);
         assert!(rec.joint_state.len() > 1000, "{name}: a real run");
-        assert_eq!(rec.rig_metadata("transport"), Some("in-process"), "{name}: ran in process");
+        assert_eq!(rec.run_metadata().unwrap().transport.as_deref(), Some("in-process"), "{name}: ran in process");
         let d = physics_digest(&rec);
         eprintln!("{name} in-process: {d}");
         got.push((name, d));

@@ -153,7 +153,7 @@ pub fn run_case(
     let tuning = recordings::RecorderTuning { compression_level: crate::in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
     let summary = crate::in_process::run(&format!("study-case-{n}"), scenario, None, recording, tuning, |s| strips.physics(s), signals);
     let (ending, summary) = match summary {
-        Ok(v) if v["stopped_by_signal"].as_bool() == Some(true) => return Ok(None),
+        Ok(v) if v.stopped_by_signal => return Ok(None),
         Ok(v) => (Ending::Completed, Some(v)),
         Err(e) => (Ending::PlantFailed(format!("{e:#}")), None),
     };
@@ -170,8 +170,8 @@ pub fn run_case(
         seeds: study.vary_seeds.iter().map(|k| (k.clone(), study.case_seed(k, n))).collect(),
         exit_code,
         status: if exit_code == 0 { String::new() } else { status },
-        misses: s.and_then(|v| v.get("misses")).and_then(serde_json::Value::as_u64),
-        safe_stops: s.and_then(|v| v.get("safe_stops")).and_then(serde_json::Value::as_u64),
+        misses: s.map(|v| v.misses),
+        safe_stops: s.map(|v| v.safe_stops),
         force_error_max_n: rolling.as_ref().and_then(|r| r.force_error_max_abs_n),
         force_error_rms_n: rolling.as_ref().and_then(|r| r.force_error_rms_n),
         bond_share: rolling.as_ref().and_then(|r| r.bond_pressure_share),
