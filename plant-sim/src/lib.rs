@@ -6,14 +6,11 @@
 pub mod arbiter;
 pub mod contact;
 pub mod drives;
-pub mod egm;
+pub mod driver;
 pub mod gate;
 pub mod histogram;
 pub mod launcher;
 pub mod limits;
-pub mod loop_lockstep;
-pub mod loop_rt;
-pub mod pacer;
 pub mod physics;
 pub mod probe;
 pub mod rng;

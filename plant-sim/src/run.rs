@@ -7,7 +7,7 @@ use anyhow::Context;
 use recordings::PlantSummary;
 use scenarios::{Mode, Scenario};
 
-use crate::loop_rt::{LoopParams, PlantLoop};
+use crate::driver::realtime::{LoopParams, PlantLoop};
 use crate::physics::Physics;
 use crate::recording::{EventKind, EventRecord, Recorder, RecorderConfig};
 use crate::stats::LoopStats;
@@ -94,7 +94,7 @@ pub struct RunSummary {
     /// What the host-floor probe measured, per CPU (None: it did not run).
     pub probe: Option<Vec<crate::probe::CpuReport>>,
     /// The EGM counters, when the scenario's `[egm]` is enabled.
-    pub egm: Option<crate::egm::EgmStats>,
+    pub egm: Option<crate::driver::egm::EgmStats>,
 }
 
 impl RunSummary {
@@ -208,7 +208,7 @@ pub fn open_recorder_with(
         egm: scenario
             .egm
             .enabled
-            .then(|| recordings::run_metadata::EgmRun { servo_lag_s: crate::egm::servo::ServoParams::from_scenario(scenario).lag_s() }),
+            .then(|| recordings::run_metadata::EgmRun { servo_lag_s: crate::driver::egm::servo::ServoParams::from_scenario(scenario).lag_s() }),
         // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
         centreline_z_m: physics.contact().map(|c| c.centreline_z_m().to_vec()),
     };
@@ -367,10 +367,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
     // [egm] enabled: the plant is an ABB robot controller speaking EGM over UDP (`egm/`),
     // instead of taking torques over iceoryx2.
     let (stats, egm) = if scenario.egm.enabled {
-        let ep = crate::egm::EgmParams::from_scenario(&scenario, mode, params.n_ticks)?;
+        let ep = crate::driver::egm::EgmParams::from_scenario(&scenario, mode, params.n_ticks)?;
         tracing::info!(sensor = %ep.sensor, "EGM: sending EgmRobot every {} s", scenario.egm.cycle_s);
         let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode);
-        let (stats, es) = crate::egm::EgmLoop::new(&scenario, &mut plant, recorder.as_mut(), ep, signals)?.run();
+        let (stats, es) = crate::driver::egm::EgmLoop::new(&scenario, &mut plant, recorder.as_mut(), ep, signals)?.run();
         (stats, Some(es))
     } else {
         let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode);

@@ -4,7 +4,7 @@
 //! gate, integrates the tick, checks the reflexes and end stops and gives what was applied, the
 //! strip record and the tick's rare events. EGM's motion controller applies its own servo torque
 //! through [`PlantTick::advance_servo`], with the same integration, sensors, reflexes and end
-//! stops. The real-time loop (`loop_rt.rs`), the lockstep loop (`loop_lockstep.rs`), the EGM loop
+//! stops. The real-time loop (`driver/realtime.rs`), the lockstep loop (`driver/lockstep.rs`), the EGM loop
 //! (`egm/`), `rig run --in-process`, `rig sweep` and the design servo drive this one type: the
 //! drivers add only pacing, ports and the hand-off of records and events.
 //!
@@ -234,7 +234,7 @@ impl PlantTick {
     }
 
     /// Whether the states say LOCKSTEP (a lockstep driver waits for its recorder, see
-    /// [`crate::loop_rt`]).
+    /// [`crate::driver::realtime`]).
     pub fn is_lockstep(&self) -> bool {
         self.lockstep
     }

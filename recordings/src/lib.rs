@@ -276,7 +276,7 @@ impl EventKind {
     }
 }
 
-/// One EGM cycle of a plant acting as the ABB robot controller (`/egm`, `plant-sim/src/egm`).
+/// One EGM cycle of a plant acting as the ABB robot controller (`/egm`, `plant-sim/src/driver/egm`).
 /// Angles in ABB's axis convention and degrees where the name says `_deg`, DH rad otherwise.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct EgmRecord {

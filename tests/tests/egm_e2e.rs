@@ -121,7 +121,7 @@ fn abb_robot_client_reads_the_rigs_joints_holds_then_steps_axis_6_with_the_docum
     // reaches 63.2 % of it after the servo's lag (emulated motion controller, plant-sim
     // README "EGM"): within half a tick of it (the torque is held over a tick).
     let t_cmd = log[50]["tm"].as_f64().unwrap();
-    let lag = plant_sim::egm::servo::ServoParams::from_scenario(&s).lag_s() * 1e3;
+    let lag = plant_sim::driver::egm::servo::ServoParams::from_scenario(&s).lag_s() * 1e3;
     assert!((lag - 12.0).abs() < 1e-9, "default lag {lag} ms");
     let a6: Vec<(f64, f64)> = log.iter().map(|e| (e["tm"].as_f64().unwrap(), floats(&e["joints"])[5] - j0[5])).collect();
     let k = a6.iter().position(|&(_, x)| x >= 1.0 - (-1.0f64).exp()).expect("axis 6 reaches 63 % of the step");

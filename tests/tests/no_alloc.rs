@@ -166,9 +166,9 @@ fn egm_run_allocations(n_ticks: u64) -> usize {
     let mut sensor = Daemon::start("egm-controller", &bin("egm-controller"), &["--scenario", sc.to_str().unwrap()], &dir);
     wait_bound(port, &mut sensor);
     let mut plant = PlantTick::from_scenario(&s, &strip::cache::cache_dir(), Mode::Lockstep).unwrap();
-    let params = plant_sim::egm::EgmParams::from_scenario(&s, Mode::Lockstep, n_ticks).unwrap();
+    let params = plant_sim::driver::egm::EgmParams::from_scenario(&s, Mode::Lockstep, n_ticks).unwrap();
     let a0 = allocations();
-    let mut egm = plant_sim::egm::EgmLoop::new(&s, &mut plant, None, params, plant_sim::signals::Signals::detached()).unwrap();
+    let mut egm = plant_sim::driver::egm::EgmLoop::new(&s, &mut plant, None, params, plant_sim::signals::Signals::detached()).unwrap();
     let (stats, es) = egm.run();
     let allocated = allocations() - a0;
     drop(egm);

@@ -5,7 +5,7 @@
 //! Before the first controller answers, tick 0 is republished every few milliseconds (a
 //! late-joining controller gets no history) and the simulation does not advance. When the
 //! watchdog expires the controller is presumed gone: the plant counts the miss and continues
-//! paced in real time (the real-time loop's pacing and budget waits, `loop_rt.rs`), so the safe
+//! paced in real time (the real-time loop's pacing and budget waits, `driver/realtime.rs`), so the safe
 //! stop is reached after `max_consecutive_misses` periods and a returning controller can take
 //! over; its first fresh answer brings the loop back to lockstep.
 //!
@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use messages::PlantStatus;
 
-use crate::loop_rt::{PlantLoop, Wait};
+use crate::driver::realtime::{PlantLoop, Wait};
 use crate::recording::EventKind;
 use crate::stats::LoopStats;
 use rig_process::clock;

@@ -41,7 +41,7 @@ use messages::PlantStatus;
 use robot::{Robot, Vec6};
 use scenarios::{Mode, Scenario};
 
-use crate::pacer::Pacer;
+use crate::driver::pacer::Pacer;
 use crate::recording::{EgmRecord, EventKind, EventRecord, Recorder, TimingRecord};
 use crate::signals::Signals;
 use crate::stack_text::StackText;

@@ -1,7 +1,7 @@
 //! The plant's real-time loop (DESIGN section 6), on a plain OS thread, and the parts of a tick
 //! every port-driven loop shares: the ports (publish the state, collect the answers, choose one
 //! with the arbiter), the tick itself ([`PlantTick`]) and the recorder hand-off. The lockstep
-//! loop (`loop_lockstep.rs`) drives the same parts with its own waits.
+//! loop (`driver/lockstep.rs`) drives the same parts with its own waits.
 //!
 //! Real-time mode, tick k: sleep until the absolute deadline t_k (CLOCK_MONOTONIC, TIMER_ABSTIME),
 //! publish state and wrench of tick k, wait on the torque listener's fd (`ppoll`) until
@@ -23,7 +23,7 @@ use rig_process::ports::{Answers, PlantPorts, Wake};
 use scenarios::Mode;
 
 use crate::arbiter::{Arbiter, ArbiterEvents, TakeoverReason};
-use crate::pacer::Pacer;
+use crate::driver::pacer::Pacer;
 use crate::recording::{ControllerStamps, EventKind, EventRecord, Recorder, StageStamps, TimingRecord};
 use crate::signals::{ControllerEnd, Signals};
 use crate::stack_text::StackText;
