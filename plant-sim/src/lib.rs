@@ -5,8 +5,8 @@
 
 pub mod arbiter;
 pub mod contact;
-pub mod drives;
 pub mod driver;
+pub mod drives;
 pub mod gate;
 pub mod histogram;
 pub mod launcher;

@@ -205,10 +205,9 @@ pub fn open_recorder_with(
         substeps: l.substeps,
         integrator: l.integrator,
         transport: about.transport.map(str::to_string),
-        egm: scenario
-            .egm
-            .enabled
-            .then(|| recordings::run_metadata::EgmRun { servo_lag_s: crate::driver::egm::servo::ServoParams::from_scenario(scenario).lag_s() }),
+        egm: scenario.egm.enabled.then(|| recordings::run_metadata::EgmRun {
+            servo_lag_s: crate::driver::egm::servo::ServoParams::from_scenario(scenario).lag_s(),
+        }),
         // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
         centreline_z_m: physics.contact().map(|c| c.centreline_z_m().to_vec()),
     };
