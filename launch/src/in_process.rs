@@ -8,11 +8,13 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
+use plant_sim::contact::StripDetail;
 use plant_sim::physics::Physics;
 use plant_sim::recording::{EventKind, EventRecord};
 use plant_sim::run::{open_recorder_with, run_length, RecordingAbout, RunSummary};
 use plant_sim::stats::LoopStats;
 use plant_sim::PlantTick;
+use recording_tools::strip_rows::CaseRows;
 use recordings::TimingRecord;
 use scenarios::{Mode, Scenario};
 
@@ -24,26 +26,42 @@ const IN_PROCESS_CONTROLLER_ID: u64 = 1;
 /// the writer competes with the cases for the cores there.
 pub const SWEEP_COMPRESSION_LEVEL: u32 = 1;
 
+/// What a case keeps: its recording (when the scenario records), its tick rows in memory for the
+/// rolling-phase numbers, or both. A sweep or study case that writes no file reads the same
+/// figures from its rows ([`recording_tools::strip_rows::CaseRows`]) as from the file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Keep<'p> {
+    /// Where to record (None: no file, whatever the scenario says).
+    pub recording: Option<&'p Path>,
+    /// Keep the tick rows in memory.
+    pub rows: bool,
+}
+
 /// One in-process run of the scenario at `scenario_path` for `duration_s` (None: the scenario's,
-/// or its nominal trajectory), recorded to `recording` when the scenario records, with the
+/// or its nominal trajectory), recorded to `keep.recording` when the scenario records, with the
 /// writer's `tuning`. `physics` builds the plant (a sweep shares the strip tables across its
 /// cases). `signals`: a stop ends the run after the current tick. Returns the plant's summary,
-/// the one `plant-sim` prints (the recording's metadata says the run was in process).
+/// the one `plant-sim` prints (the recording's metadata says the run was in process), and the
+/// tick rows when `keep.rows`.
 pub fn run(
     rig: &str,
     scenario_path: &Path,
     duration_s: Option<f64>,
-    recording: &Path,
+    keep: Keep,
     tuning: recordings::RecorderTuning,
     physics: impl FnOnce(&Scenario) -> anyhow::Result<Physics>,
     signals: plant_sim::signals::Signals,
-) -> anyhow::Result<recordings::PlantSummary> {
+) -> anyhow::Result<(recordings::PlantSummary, Option<CaseRows>)> {
     let s = Scenario::load(scenario_path)?;
     anyhow::ensure!(!s.egm.enabled, "--in-process: {} enables [egm]; the EGM path runs with its daemons only", scenario_path.display());
     let text = std::fs::read_to_string(scenario_path).with_context(|| format!("reading {}", scenario_path.display()))?;
     let n_ticks = run_length(&s, duration_s)?.n_ticks;
     let physics = physics(&s)?;
-    let path = s.recording.enabled.then(|| recording.to_path_buf());
+    let path = keep.recording.filter(|_| s.recording.enabled).map(Path::to_path_buf);
+    let mut rows = keep.rows.then(|| {
+        let z = physics.contact().map_or(Vec::new(), |c| c.centreline_z_m().to_vec());
+        CaseRows::new(z, usize::try_from(n_ticks).unwrap_or(0))
+    });
     let mut recorder = match &path {
         Some(p) => {
             let about = RecordingAbout { rig, mode: Mode::Lockstep, scenario_path, scenario_text: text, transport: Some("in-process") };
@@ -51,7 +69,9 @@ pub fn run(
         }
         None => None,
     };
-    let mut plant = PlantTick::new(&s, physics, Mode::Lockstep);
+    // Without a recording only the figures read the strip: its pressure under the wheel.
+    let detail = if recorder.is_some() { StripDetail::Full } else { StripDetail::UnderWheel };
+    let mut plant = PlantTick::new(&s, physics, Mode::Lockstep).with_strip_detail(detail);
     let mut controller = controller::Controller::from_scenario(&s).with_id(IN_PROCESS_CONTROLLER_ID);
     if let Some(r) = recorder.as_mut() {
         let text = format!("plant started: rig {rig}, mode Lockstep (in-process), {n_ticks} ticks");
@@ -70,9 +90,15 @@ pub fn run(
         plant_sim::tick_events::make_room_for_tick(recorder.as_mut());
         let outcome = plant.advance(Some(&torque));
         hand_on.hand_on(&outcome.events, recorder.as_mut());
-        if let Some(r) = recorder.as_mut() {
+        if recorder.is_some() || rows.is_some() {
             let timing = TimingRecord { missed: outcome.decision.missed, ..TimingRecord::default() };
-            r.record_tick_commanded(&plant_sim::tick::tick_record(state, wrench, &outcome, Some(diag), timing), Some(&torque));
+            let record = plant_sim::tick::tick_record(state, wrench, &outcome, Some(diag), timing);
+            if let Some(r) = recorder.as_mut() {
+                r.record_tick_commanded(&record, Some(&torque));
+            }
+            if let Some(rows) = rows.as_mut() {
+                rows.push(&record);
+            }
         }
     }
     let tick = plant.tick();
@@ -100,5 +126,5 @@ pub fn run(
         probe: None,
         egm: None,
     };
-    Ok(summary.to_summary(rig))
+    Ok((summary.to_summary(rig), rows))
 }

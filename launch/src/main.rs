@@ -180,6 +180,12 @@ struct SweepArgs {
     /// (default: 10, or the base scenario's own). Every per-tick channel is recorded whatever it is.
     #[arg(long, allow_hyphen_values = true, value_parser = positive_hertz)]
     scene_rate: Option<f64>,
+    /// Which case recordings to write (the built-in controller's in-process cases), as
+    /// `rig study`'s flag: `failing` (the default: a case with a non-zero exit status, recorded by
+    /// running it again, bit for bit), `all` or `none`. The table's figures come from each case's
+    /// ticks in memory either way. Cases with `--controller` always record.
+    #[arg(long, value_enum, default_value = "failing")]
+    recordings: study::file::Keep,
     #[command(flatten)]
     launch: LaunchArgs,
 }
@@ -428,7 +434,8 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
     eprintln!("rig {rig}: plant tick + controller step in process (lockstep, no daemons), scenario {}", scenario.display());
     let recording = dir.join("run.mcap");
     let tuning = recordings::RecorderTuning::default();
-    let v = in_process::run(rig, scenario, duration_s, &recording, tuning, |s| plant_sim::physics::Physics::new(s, &cache_dir), signals)?;
+    let keep = in_process::Keep { recording: Some(&recording), rows: false };
+    let (v, _) = in_process::run(rig, scenario, duration_s, keep, tuning, |s| plant_sim::physics::Physics::new(s, &cache_dir), signals)?;
     print!("{}", summary::run_summary(&v));
     let numbers = match recording_tools::cli::summary_numbers(&recording) {
         Ok(n) => Some(n),
@@ -487,7 +494,8 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
             )?;
             l.quiet = true;
             let outcome = rt.block_on(supervise::supervise(&l))?;
-            let (result, stopped) = case_result(n, n_cases, label, path, &l.recording, outcome);
+            let rolling = recording_tools::cli::summary_numbers(&l.recording).ok().and_then(|n| n.rolling);
+            let (result, stopped) = case_result(n, n_cases, label, path, Some(&l.recording), rolling, outcome);
             done.push((result, stopped));
             if stopped {
                 break;
@@ -503,13 +511,29 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
             let recording = case_dir.join("run.mcap");
             let rig = format!("sweep-case-{n:02}");
             let tuning = recordings::RecorderTuning { compression_level: in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
-            let summary = in_process::run(&rig, path, a.launch.duration, &recording, tuning, |s| strips.physics(s), signals);
-            let (ending, summary) = match summary {
-                Ok(v) if v.stopped_by_signal => (Ending::Interrupted, Some(v)),
-                Ok(v) => (Ending::Completed, Some(v)),
-                Err(e) => (Ending::PlantFailed(format!("{e:#}")), None),
+            let all = a.recordings == study::file::Keep::All;
+            let keep = in_process::Keep { recording: all.then_some(recording.as_path()), rows: true };
+            let ran = in_process::run(&rig, path, a.launch.duration, keep, tuning.clone(), |s| strips.physics(s), signals);
+            let (ending, summary, rows) = match ran {
+                Ok((v, rows)) if v.stopped_by_signal => (Ending::Interrupted, Some(v), rows),
+                Ok((v, rows)) => (Ending::Completed, Some(v), rows),
+                Err(e) => (Ending::PlantFailed(format!("{e:#}")), None, None),
             };
-            case_result(n, n_cases, label, path, &recording, supervise::Outcome { ending, plant_summary: summary })
+            let outcome = supervise::Outcome { ending, plant_summary: summary };
+            let failing = outcome.exit_code() != 0 && outcome.plant_summary.is_some() && matches!(outcome.ending, Ending::Completed);
+            // A failing case kept by `--recordings failing` runs again with its recorder: lockstep in
+            // process is deterministic, the file is that very run.
+            let recorded = if all {
+                true
+            } else if failing && a.recordings == study::file::Keep::Failing {
+                let again = in_process::Keep { recording: Some(&recording), rows: false };
+                in_process::run(&rig, path, a.launch.duration, again, tuning, |s| strips.physics(s), signals).is_ok()
+            } else {
+                false
+            };
+            let rolling = rows.as_ref().and_then(|r| r.rolling_numbers());
+            let recording = (recorded && recording.exists()).then_some(recording.as_path());
+            case_result(n, n_cases, label, path, recording, rolling, outcome)
         })
     };
     let interrupted = done.iter().any(|(_, stopped)| *stopped).then_some(130);
@@ -520,17 +544,20 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
     print!("{}", sweep::table(&results));
     let json = dir.join("sweep.json");
     std::fs::write(&json, serde_json::to_string_pretty(&results)?).with_context(|| format!("writing {}", json.display()))?;
-    println!("cases, recordings and {} in {}", json.file_name().unwrap_or_default().to_string_lossy(), dir.display());
+    let kept = results.iter().filter(|r| r.recording.is_some()).count();
+    println!("cases, {kept} recording(s) and {} in {}", json.file_name().unwrap_or_default().to_string_lossy(), dir.display());
     Ok(interrupted.unwrap_or_else(|| sweep::sweep_exit_code(&results)))
 }
 
-/// One sweep case's row from how it ended and its recording; true if it was stopped by a signal.
+/// One sweep case's row from how it ended, its rolling-phase figures and its recording if written;
+/// true if it was stopped by a signal.
 fn case_result(
     n: usize,
     n_cases: usize,
     label: &str,
     path: &Path,
-    recording: &Path,
+    recording: Option<&Path>,
+    rolling: Option<recording_tools::report::RollingNumbers>,
     outcome: supervise::Outcome,
 ) -> (sweep::CaseResult, bool) {
     let exit_code = outcome.exit_code();
@@ -538,13 +565,11 @@ fn case_result(
     let status = line.split_once(": ").and_then(|(_, rest)| rest.split_once(": ")).map_or(line.clone(), |(_, why)| why.to_string());
     eprintln!("rig sweep: case {}/{n_cases}: {label}: {line}", n + 1);
     let summary = outcome.plant_summary.as_ref();
-    let numbers = recording_tools::cli::summary_numbers(recording).ok();
-    let rolling = numbers.as_ref().and_then(|n| n.rolling.clone());
     let stopped = matches!(outcome.ending, Ending::Interrupted | Ending::Terminated);
     let result = sweep::CaseResult {
         label: label.to_string(),
         scenario: path.to_path_buf(),
-        recording: recording.to_path_buf(),
+        recording: recording.map(Path::to_path_buf),
         exit_code,
         status,
         misses: summary.map(|v| v.misses),

@@ -1,8 +1,10 @@
 //! `rig sweep`: a parameter study. Each case is the base scenario with some fields overridden
 //! (`--set section.field=v1,v2,...`), run in lockstep in process (`in_process.rs`: the plant's
 //! tick and the controller's step in one thread, bit-identical to `rig run --mode lockstep` of
-//! that scenario), one case per core at a time, and read back from its recording. One `--set` per axis; by default each axis is varied alone around the base
-//! scenario (a robustness table), with `--grid` over every combination.
+//! that scenario), one case per core at a time, its figures from its ticks kept in memory and its
+//! recording written only when `--recordings` asks. One `--set` per axis; by default each axis is
+//! varied alone around the base scenario (a robustness table), with `--grid` over every
+//! combination.
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -137,12 +139,13 @@ pub fn set_scene_rate(doc: &mut toml::Table, axes: &[Axis], flag: Option<f64>) -
     }
 }
 
-/// What one case measured (from its recording and the plant's summary).
+/// What one case measured (from its ticks and the plant's summary).
 #[derive(Debug, Clone, Serialize)]
 pub struct CaseResult {
     pub label: String,
     pub scenario: PathBuf,
-    pub recording: PathBuf,
+    /// The case's recording, when written (`--keep`).
+    pub recording: Option<PathBuf>,
     /// `rig run`'s exit status for this case (0 clean, 4 reached the end with a safe stop,
     /// reflex, refused torque or an incomplete recording, 2/3 a daemon failed).
     pub exit_code: i32,
@@ -373,7 +376,7 @@ mod tests {
         CaseResult {
             label: label.into(),
             scenario: PathBuf::new(),
-            recording: PathBuf::new(),
+            recording: None,
             exit_code,
             status: status.into(),
             misses: Some(0),

@@ -620,6 +620,21 @@ impl StripTables {
     }
 }
 
+/// How much of the strip's state a tick's record carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StripDetail {
+    /// Everything the recording and the 3D scene draw: every centre-line node's pressure, the
+    /// top line's displacement, the maximum pressure (O(nodes × modes) per tick).
+    #[default]
+    Full,
+    /// The scalars (wheel z, contact and bottom force, top displacement under the wheel) and the
+    /// centre-line pressure at the two nodes around the wheel only, the rest zero and the maximum
+    /// NaN: what the rolling-phase figures read (`recording_tools::report::interpolate`), bit for
+    /// bit, for a sweep or study case that writes no recording. The single-model strip only; a
+    /// windowed strip's record stays full.
+    UnderWheel,
+}
+
 /// The strip, its bulge and the unilateral wheel contact (see the module docs).
 pub struct StripContact {
     geo: ContactGeometry,
@@ -773,6 +788,12 @@ impl StripContact {
     /// Strip outputs at the current state (end of the last substep) for the recording:
     /// O(centre-line nodes × modes), once per tick.
     pub fn fill_record(&self, r: &mut StripRecord) {
+        self.fill_record_with(r, StripDetail::Full);
+    }
+
+    /// [`StripContact::fill_record`] to the given detail: with [`StripDetail::UnderWheel`] the
+    /// centre line's pressure at the two nodes around the wheel only, O(modes).
+    pub fn fill_record_with(&self, r: &mut StripRecord, detail: StripDetail) {
         let tables = &*self.tables;
         let t = &tables.table;
         let (g, s) = t.locate(self.z_a_m);
@@ -790,6 +811,22 @@ impl StripContact {
         let (d0, d1) = (&t.d_cl[g * n_cl..(g + 1) * n_cl], &t.d_cl[(g + 1) * n_cl..(g + 2) * n_cl]);
         // Centre-line reactions from the state, four rows per pass over x.
         let row = |c: usize| &tables.ccl[c * m2..(c + 1) * m2];
+        if detail == StripDetail::UnderWheel {
+            // The nodes the pressure under the wheel interpolates between (the first node
+            // at or after the wheel's z and the one before it), each bit for bit the full
+            // record's (`dot4` is `dot` row by row); the others, the top line and the maximum
+            // are not computed.
+            let j = tables.cl_z_m.partition_point(|&zn| zn <= self.z_a_m);
+            r.centreline_pressure_pa[..n_cl].fill(0.0);
+            r.top_centreline_uy_m[..n_cl].fill(0.0);
+            for c in j.saturating_sub(1)..(j + 1).min(n_cl) {
+                let reaction = dot(row(c), x) + ((1.0 - s) * d0[c] + s * d1[c]) * f + self.cl_bulge_n[c];
+                r.centreline_pressure_pa[c] = reaction / tables.cl_area_m2[c];
+            }
+            r.n_centreline = n_cl as u32;
+            r.max_bottom_pressure_pa = f64::NAN;
+            return;
+        }
         let mut c = 0;
         while c + 4 <= n_cl {
             let y = dot4([row(c), row(c + 1), row(c + 2), row(c + 3)], x);
@@ -877,6 +914,35 @@ pub(crate) mod tests {
             c.substep(&pos, &rot, &Vec6::zeros());
         }
         c
+    }
+
+    /// The under-the-wheel record is the full record's scalars and its pressure at the two nodes
+    /// around the wheel, bit for bit (what a sweep case without a recording reads), at a node,
+    /// between two, and before the first and past the last node.
+    #[test]
+    fn the_under_wheel_record_is_the_full_records_at_the_nodes_around_the_wheel() {
+        let model = coarse();
+        let c0 = run_hold(&model, 1e-4, 0.010, STRIP_TOP_HEIGHT_M - 0.2e-3, 0.05);
+        let z_nodes = c0.centreline_z_m().to_vec();
+        let (first, last) = (z_nodes[0], z_nodes[z_nodes.len() - 1]);
+        for z in [first - 1e-3, first, 0.010, 0.010 + 0.37 * TABLE_STEP_M, z_nodes[z_nodes.len() / 2], last, last + 1e-3] {
+            let c = run_hold(&model, 1e-4, z, STRIP_TOP_HEIGHT_M - 0.2e-3, 0.02);
+            let (mut full, mut under) = (StripRecord::default(), StripRecord::default());
+            c.fill_record(&mut full);
+            c.fill_record_with(&mut under, StripDetail::UnderWheel);
+            let bits = |r: &StripRecord| [r.wheel_z_m, r.contact_force_n, r.bottom_force_n, r.top_displacement_m].map(f64::to_bits);
+            assert_eq!((bits(&under), under.n_centreline), (bits(&full), full.n_centreline), "z = {z}");
+            let j = z_nodes.partition_point(|&zn| zn <= full.wheel_z_m);
+            let around: Vec<usize> = (j.saturating_sub(1)..(j + 1).min(z_nodes.len())).collect();
+            assert!(!around.is_empty() && around.len() <= 2, "z = {z}: {around:?}");
+            for &k in &around {
+                assert_eq!(under.centreline_pressure_pa[k].to_bits(), full.centreline_pressure_pa[k].to_bits(), "z = {z}, node {k}");
+                assert!(full.centreline_pressure_pa[k] != 0.0, "z = {z}, node {k}: a pressed node");
+            }
+            let others = (0..z_nodes.len()).filter(|k| !around.contains(k));
+            assert!(others.clone().all(|k| under.centreline_pressure_pa[k] == 0.0), "z = {z}");
+            assert!(under.max_bottom_pressure_pa.is_nan() && full.max_bottom_pressure_pa.is_finite());
+        }
     }
 
     /// Wheel held at a fixed depth: the steady force solves p = k (H + w·u_bulge − y − C_s p)

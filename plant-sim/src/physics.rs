@@ -439,8 +439,13 @@ impl Physics {
     /// Strip outputs of the current state for the recording. Robot-only: the wheel position along
     /// the strip (the TCP's task z) and zero forces.
     pub fn fill_strip_record(&self, r: &mut recordings::StripRecord) {
+        self.fill_strip_record_with(r, crate::contact::StripDetail::Full);
+    }
+
+    /// [`Physics::fill_strip_record`] to the given detail (the single-model strip's).
+    pub fn fill_strip_record_with(&self, r: &mut recordings::StripRecord, detail: crate::contact::StripDetail) {
         if let Some(c) = &self.contact {
-            c.fill_record(r);
+            c.fill_record_with(r, detail);
             return;
         }
         if let Some(c) = &self.chain {

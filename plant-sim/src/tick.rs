@@ -60,6 +60,8 @@ pub struct PlantTick {
     in_end_stop: Option<usize>,
     first: FirstTicks,
     strip: StripRecord,
+    /// How much of the strip the record carries (full unless a case records nothing).
+    strip_detail: crate::contact::StripDetail,
     /// `[sensor]`: the force/torque sensor's chain and this tick's reading (None: exact wrench).
     sensor: Option<Sensor>,
     /// `[drives]` with encoders: what the state reports as q and q̇ (None: exact).
@@ -129,7 +131,14 @@ impl PlantTick {
             in_end_stop: None,
             first: FirstTicks::default(),
             strip: StripRecord::default(),
+            strip_detail: crate::contact::StripDetail::Full,
         }
+    }
+
+    /// The detail of the strip's record in each tick's outcome (default full: the recording's).
+    pub fn with_strip_detail(mut self, detail: crate::contact::StripDetail) -> PlantTick {
+        self.strip_detail = detail;
+        self
     }
 
     /// [`PlantTick::new`] with the scenario's physics (`cache_dir`: the strip model cache).
@@ -281,7 +290,7 @@ impl PlantTick {
         self.physics.step_tick(&decision.tau);
         self.read_sensors(tick + 1, t_next, &mut events);
         self.check_limits(tick + 1, t_next, &mut events);
-        self.physics.fill_strip_record(&mut self.strip);
+        self.physics.fill_strip_record_with(&mut self.strip, self.strip_detail);
         let applied = JointTorque {
             contract_version: CONTRACT_VERSION,
             controller_status,

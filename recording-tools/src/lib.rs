@@ -7,6 +7,8 @@
 //! - [`report`] turns a recording into numbers and figures.
 //! - [`tracking`] is the rolling-phase force-tracking metric, one rule for every caller;
 //!   [`tracking_input`] reads a recording's ticks into it.
+//! - [`strip_rows`] are the `/strip` rows the rolling numbers read: a recording's, or a case's
+//!   kept in memory (a sweep or study case that writes no file).
 //! - [`bond_map`] is a long seal's bond map: the peak pressure at each millimetre of the strip.
 //! - [`compare`] puts several recordings side by side.
 //! - [`replay`] drives a controller open-loop from a recording and compares its torques.
@@ -22,6 +24,7 @@ pub mod plots;
 pub mod read;
 pub mod replay;
 pub mod report;
+pub mod strip_rows;
 pub mod tmpfs_test;
 pub mod tracking;
 pub mod tracking_input;

@@ -6,8 +6,9 @@ use crate::read::Recording;
 use serde::Serialize;
 
 pub use crate::bond_map::BOND_PRESSURE_PA;
+use crate::strip_rows::StripRows;
 pub use crate::tracking::ROLLING_MIN_STEP_M;
-use crate::tracking::{self, ForceTracking};
+use crate::tracking::{self, ForceTracking, TrackingTick};
 pub use crate::tracking_input::tracking_ticks;
 
 /// Nearest-rank percentiles of a sample, in the sample's unit.
@@ -214,32 +215,28 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
 }
 
 fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
-    let ticks = tracking_ticks(rec);
-    let roll = tracking::rolling_ticks(&ticks);
+    rolling_numbers_of(&tracking_ticks(rec), &crate::strip_rows::RecordedRows::of(rec))
+}
+
+/// The rolling-phase numbers of tick rows as [`tracking_ticks`] gives them and their `/strip`
+/// rows (a recording's, or a case's kept in memory: [`crate::strip_rows::CaseRows`]); the same
+/// figures from either, bit for bit, as long as the rows are the recorded ones (f32 pressures).
+pub fn rolling_numbers_of(ticks: &[TrackingTick], rows: &impl StripRows) -> Option<RollingNumbers> {
+    let roll = tracking::rolling_ticks(ticks);
     if roll.is_empty() {
         return None;
     }
-    let force = tracking::force_tracking(&ticks, &roll);
-    let z_nodes = rec.centreline_z_m();
-    let moving = rec.strip_nodes_move();
-    let mut row_z = Vec::new();
+    let force = tracking::force_tracking(ticks, &roll);
+    let mut scratch = Vec::new();
     let mut rolled = 0.0;
     let mut pressed = 0.0;
     let mut have_pressure = true;
     let mut weakest: Option<[f64; 2]> = None;
     for &i in &roll {
-        let dz = (rec.strip[i].wheel_z_m - rec.strip[i - 1].wheel_z_m).abs();
+        let dz = (rows.wheel_z_m(i) - rows.wheel_z_m(i - 1)).abs();
         rolled += dz;
-        let z = rec.strip[i].wheel_z_m;
-        // a windowed strip's nodes move with the wheel: this row's own
-        let nodes = if moving {
-            row_z.clear();
-            row_z.extend(rec.strip_row_z(i).iter().map(|&z| z as f64));
-            &row_z
-        } else {
-            &z_nodes
-        };
-        match interpolate(nodes, &rec.strip[i].centreline_pressure_pa, z) {
+        let z = rows.wheel_z_m(i);
+        match interpolate(rows.centreline_z_m(i, &mut scratch), rows.centreline_pressure_pa(i), z) {
             Some(p) => {
                 // Compression is positive (the plant's convention); tension never bonds.
                 if p >= BOND_PRESSURE_PA {
@@ -254,8 +251,8 @@ fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
     }
     Some(RollingNumbers {
         ticks: roll.len(),
-        z_from_m: rec.strip[roll[0] - 1].wheel_z_m,
-        z_to_m: rec.strip[roll[roll.len() - 1]].wheel_z_m,
+        z_from_m: rows.wheel_z_m(roll[0] - 1),
+        z_to_m: rows.wheel_z_m(roll[roll.len() - 1]),
         rolled_length_m: rolled,
         force_error_max_abs_n: force.map(|f| f.max_abs_n),
         force_error_rms_n: force.map(|f| f.rms_n),

@@ -20,7 +20,7 @@ fn a_sweep_over_bump_heights_is_the_runs_it_stands_for_and_the_bump_superposes()
     let mut sweep = Daemon::start(
         "rig sweep",
         &bin("rig"),
-        &["sweep", base.to_str().unwrap(), "--set", "bulge.height_mm=0,0.1,0.4", "--out", out.to_str().unwrap()],
+        &["sweep", base.to_str().unwrap(), "--set", "bulge.height_mm=0,0.1,0.4", "--recordings", "all", "--out", out.to_str().unwrap()],
         &dir,
     );
     let st = sweep.expect_exit(LONG);
@@ -41,10 +41,17 @@ fn a_sweep_over_bump_heights_is_the_runs_it_stands_for_and_the_bump_superposes()
     eprintln!("weakest under the wheel at bump 0 / 0.1 / 0.4 mm: {weakest:?} Pa; ratio {ratio}");
     assert!(weakest[1] < weakest[0] && (3.6..4.4).contains(&ratio), "weakest {weakest:?} Pa, ratio {ratio}");
 
-    // Every case ran in process; each is bit for bit the daemons' lockstep run of its scenario.
-    for n in 0..3 {
+    // Every case ran in process; each is bit for bit the daemons' lockstep run of its scenario,
+    // and the table's figures (from the case's ticks in memory) are its recording's, bit for bit.
+    for (n, c) in cases.iter().enumerate() {
         let case = out.join(format!("case-{n:02}"));
         let swept = Recording::open_complete(case.join("run.mcap")).unwrap();
+        let read = recording_tools::report::numbers(&swept).rolling.unwrap();
+        assert_eq!(c["recording"].as_str(), Some(case.join("run.mcap").to_str().unwrap()), "case {n}");
+        let weakest = read.bond_weakest_pa_at_z_m.unwrap()[0];
+        let from_file = [read.force_error_max_abs_n.unwrap(), read.force_error_rms_n.unwrap(), read.bond_pressure_share.unwrap(), weakest];
+        let in_memory = ["force_error_max_n", "force_error_rms_n", "bond_share", "bond_weakest_pa"].map(|k| c[k].as_f64().unwrap());
+        assert_eq!(in_memory.map(f64::to_bits), from_file.map(f64::to_bits), "case {n}: {in_memory:?} in memory, {from_file:?} read back");
         assert_eq!(swept.run_metadata().unwrap().transport.as_deref(), Some("in-process"), "case {n}");
         let again = dir.join(format!("daemons-{n:02}"));
         let mut run = Daemon::start(
@@ -57,6 +64,24 @@ fn a_sweep_over_bump_heights_is_the_runs_it_stands_for_and_the_bump_superposes()
         let daemons = Recording::open_complete(again.join("run.mcap")).unwrap();
         assert_eq!(daemons.run_metadata().unwrap().transport, None, "case {n}: the daemons' run");
         assert_eq!(physics_digest(&swept), physics_digest(&daemons), "case {n}: in-process sweep case != daemons' lockstep run");
+    }
+
+    // Without recordings the plant fills only the strip's pressure under the wheel
+    // (`StripDetail::UnderWheel`): the same figures, bit for bit.
+    let bare = dir.join("bare");
+    let mut sweep = Daemon::start(
+        "rig sweep",
+        &bin("rig"),
+        &["sweep", base.to_str().unwrap(), "--set", "bulge.height_mm=0,0.1,0.4", "--recordings", "none", "--out", bare.to_str().unwrap()],
+        &dir,
+    );
+    assert!(sweep.expect_exit(LONG).success(), "{}", sweep.stderr());
+    let bare: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(bare.join("sweep.json")).unwrap()).unwrap();
+    for (n, (a, b)) in cases.iter().zip(bare.as_array().unwrap()).enumerate() {
+        for k in ["force_error_max_n", "force_error_rms_n", "bond_share", "bond_weakest_pa", "bond_weakest_z_m"] {
+            assert_eq!(a[k].as_f64().map(f64::to_bits), b[k].as_f64().map(f64::to_bits), "case {n}: {k} recorded {a} vs not {b}");
+        }
+        assert!(b["recording"].is_null(), "case {n}: {b}");
     }
 
     // A case records every tick, and the Foxglove scene at the sweep's 10 Hz (its scenario says
@@ -88,8 +113,18 @@ fn scene_rate_flag_and_a_base_scenarios_own_rate_are_kept() {
     std::fs::write(&base, std::fs::read_to_string(default).unwrap() + "\n[recording]\nscene_rate_hz = 50.0\n").unwrap();
     for (flag, want) in [(None, 50.0), (Some("4"), 4.0)] {
         let out = dir.join(format!("out-{want}"));
-        let mut args =
-            vec!["sweep", base.to_str().unwrap(), "--set", "trajectory.roll_s=1", "--duration", "0.5", "--out", out.to_str().unwrap()];
+        let mut args = vec![
+            "sweep",
+            base.to_str().unwrap(),
+            "--set",
+            "trajectory.roll_s=1",
+            "--duration",
+            "0.5",
+            "--recordings",
+            "all",
+            "--out",
+            out.to_str().unwrap(),
+        ];
         if let Some(f) = flag {
             args.extend(["--scene-rate", f]);
         }
@@ -114,4 +149,40 @@ fn a_bad_case_is_refused_before_any_run_starts() {
     assert!(!st.success());
     assert!(err.contains("case-01/scenario.toml") && err.contains("abc"), "{err}");
     assert!(!out.join("case-00").join("run.mcap").exists(), "case 0 ran before case 1 was checked");
+}
+
+/// By default (`--recordings failing`) a sweep writes the recording of a failing case only (exit 4: a
+/// contact force reflex at a 10.01 N limit against the 10 N set-point), by running it again: that
+/// file says why it failed; the clean case writes none, and `--recordings none` writes no file at all.
+/// Both tables are the same figures.
+#[test]
+fn a_sweep_keeps_the_recordings_of_failing_cases_only() {
+    let rig = unique_rig("sweepkeep");
+    let dir = temp_dir(&rig);
+    let mut tables = Vec::new();
+    for keep in [None, Some("none")] {
+        let out = dir.join(format!("out-{}", keep.unwrap_or("default")));
+        let mut args = vec!["sweep", "--set", "safety.max_contact_force_n=10.01,40", "--out", out.to_str().unwrap()];
+        if let Some(k) = keep {
+            args.extend(["--recordings", k]);
+        }
+        let mut sweep = Daemon::start("rig sweep", &bin("rig"), &args, &dir);
+        let st = sweep.expect_exit(LONG);
+        let table = sweep.stdout();
+        assert_eq!(st.code(), Some(4), "{table}\n{}", sweep.stderr());
+        assert!(table.lines().any(|l| l.starts_with("| safety.max_contact_force_n=10.01 | 4: ") && l.contains("reflex")), "{table}");
+        assert!(table.lines().any(|l| l.starts_with("| safety.max_contact_force_n=40 | 0 |")), "{table}");
+        let cases: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("sweep.json")).unwrap()).unwrap();
+        let kept: Vec<bool> = (0..2).map(|n| out.join(format!("case-{n:02}/run.mcap")).exists()).collect();
+        let listed: Vec<bool> = (0..2).map(|n| !cases[n]["recording"].is_null()).collect();
+        if keep.is_none() {
+            assert_eq!((kept.clone(), listed), (vec![true, false], vec![true, false]), "{cases}");
+            let rec = Recording::open_complete(out.join("case-00/run.mcap")).unwrap();
+            assert!(rec.events.iter().any(|e| e.kind_name == "reflex"), "the failing case's recording has its reflex: {:?}", rec.events);
+        } else {
+            assert_eq!((kept, listed), (vec![false, false], vec![false, false]), "{cases}");
+        }
+        tables.push(table.lines().filter(|l| l.starts_with('|')).collect::<Vec<_>>().join("\n"));
+    }
+    assert_eq!(tables[0], tables[1], "the figures do not depend on what is kept");
 }

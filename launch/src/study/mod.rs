@@ -139,7 +139,10 @@ pub fn plan(study: &Study, dir: &Path, resume: bool) -> anyhow::Result<()> {
 }
 
 /// Runs case `n` of the study in `dir` in process (lockstep, the built-in controller) and
-/// returns its record; the recording is kept per `keep` (`force`: kept whatever the outcome).
+/// returns its record. Its figures come from its tick rows in memory (no file written and read
+/// back); with `Keep::All` the same run records, and a failing case that `Keep::Failing` keeps
+/// runs again with its recorder: lockstep in process is deterministic, so the file is that very
+/// run, bit for bit.
 pub fn run_case(
     study: &Study,
     (scenario, recording): (&Path, &Path),
@@ -149,20 +152,23 @@ pub fn run_case(
     strips: &crate::sweep::SharedStrips,
     signals: plant_sim::signals::Signals,
 ) -> anyhow::Result<Option<CaseRecord>> {
+    use crate::in_process::Keep as Sink;
     use crate::supervise::{Ending, Outcome};
     let tuning = recordings::RecorderTuning { compression_level: crate::in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
-    let summary = crate::in_process::run(&format!("study-case-{n}"), scenario, None, recording, tuning, |s| strips.physics(s), signals);
-    let (ending, summary) = match summary {
-        Ok(v) if v.stopped_by_signal => return Ok(None),
-        Ok(v) => (Ending::Completed, Some(v)),
-        Err(e) => (Ending::PlantFailed(format!("{e:#}")), None),
+    let rig = format!("study-case-{n}");
+    // Every case's recording is wanted: written in the one run.
+    let first = Sink { recording: (keep == Keep::All).then_some(recording), rows: true };
+    let ran = crate::in_process::run(&rig, scenario, None, first, tuning.clone(), |s| strips.physics(s), signals);
+    let (ending, summary, rows) = match ran {
+        Ok((v, _)) if v.stopped_by_signal => return Ok(None),
+        Ok((v, rows)) => (Ending::Completed, Some(v), rows),
+        Err(e) => (Ending::PlantFailed(format!("{e:#}")), None, None),
     };
     let outcome = Outcome { ending, plant_summary: summary };
     let exit_code = outcome.exit_code();
     let line = crate::summary::status_line(exit_code, &outcome.ending, outcome.plant_summary.as_ref());
     let status = line.split_once(": ").and_then(|(_, rest)| rest.split_once(": ")).map_or(line.clone(), |(_, why)| why.to_string());
-    let numbers = recording_tools::cli::summary_numbers(recording).ok();
-    let rolling = numbers.as_ref().and_then(|n| n.rolling.clone());
+    let rolling = rows.as_ref().and_then(|r| r.rolling_numbers());
     let s = outcome.plant_summary.as_ref();
     let mut r = CaseRecord {
         case: n,
@@ -186,8 +192,25 @@ pub fn run_case(
         Keep::Failing => !r.passed,
         Keep::None => false,
     };
-    if !kept {
-        let _ = std::fs::remove_file(recording);
+    // A case the plant refused to run has no recording to keep.
+    if kept && keep != Keep::All && outcome.plant_summary.is_some() {
+        let again = crate::in_process::run(
+            &rig,
+            scenario,
+            None,
+            Sink { recording: Some(recording), rows: false },
+            tuning,
+            |s| strips.physics(s),
+            signals,
+        );
+        match again {
+            Ok((v, _)) if v.stopped_by_signal => {
+                let _ = std::fs::remove_file(recording);
+                return Ok(None);
+            }
+            Ok(_) => {}
+            Err(e) => anyhow::bail!("case {n}: recording it again: {e:#}"),
+        }
     }
     Ok(Some(r))
 }
