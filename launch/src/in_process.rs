@@ -69,9 +69,11 @@ pub fn run(
         }
         None => None,
     };
-    // Without a recording only the figures read the strip: its pressure under the wheel.
+    // Without a recording only the figures read the strip: its pressure under the wheel; with
+    // one, the scene's top line only on the ticks it is drawn.
     let detail = if recorder.is_some() { StripDetail::Full } else { StripDetail::UnderWheel };
-    let mut plant = PlantTick::new(&s, physics, Mode::Lockstep).with_strip_detail(detail);
+    let top_line_every = recorder.as_ref().and_then(|r| r.scene_every());
+    let mut plant = PlantTick::new(&s, physics, Mode::Lockstep).with_strip_detail(detail).with_top_line_every(top_line_every);
     let mut controller = controller::Controller::from_scenario(&s).with_id(IN_PROCESS_CONTROLLER_ID);
     if let Some(r) = recorder.as_mut() {
         let text = format!("plant started: rig {rig}, mode Lockstep (in-process), {n_ticks} ticks");

@@ -627,6 +627,9 @@ pub enum StripDetail {
     /// top line's displacement, the maximum pressure (O(nodes × modes) per tick).
     #[default]
     Full,
+    /// [`StripDetail::Full`] without the top line (zero): a tick the recording draws no scene
+    /// for; every pressure and the maximum as in the full record, bit for bit.
+    NoTopLine,
     /// The scalars (wheel z, contact and bottom force, top displacement under the wheel) and the
     /// centre-line pressure at the two nodes around the wheel only, the rest zero and the maximum
     /// NaN: what the rolling-phase figures read (`recording_tools::report::interpolate`), bit for
@@ -843,6 +846,12 @@ impl StripContact {
             r.centreline_pressure_pa[c] = p;
             pmax = pmax.max(p);
         }
+        r.n_centreline = n_cl as u32;
+        r.max_bottom_pressure_pa = if n_cl > 0 { pmax } else { 0.0 };
+        if detail == StripDetail::NoTopLine {
+            r.top_centreline_uy_m[..n_cl].fill(0.0);
+            return;
+        }
         // Top centre-line displacement (same z), for the decimated 3D scene.
         let n_tcl = self.tcl_bulge_m.len();
         let (e0, e1) = (&t.d_tcl[g * n_tcl..(g + 1) * n_tcl], &t.d_tcl[(g + 1) * n_tcl..(g + 2) * n_tcl]);
@@ -862,8 +871,6 @@ impl StripContact {
             r.top_centreline_uy_m[c] = u + ((1.0 - s) * e0[c] + s * e1[c]) * f + self.tcl_bulge_m[c];
         }
         r.top_centreline_uy_m[n_tcl..n_cl].fill(0.0);
-        r.n_centreline = n_cl as u32;
-        r.max_bottom_pressure_pa = if n_cl > 0 { pmax } else { 0.0 };
     }
 }
 
@@ -942,6 +949,14 @@ pub(crate) mod tests {
             let others = (0..z_nodes.len()).filter(|k| !around.contains(k));
             assert!(others.clone().all(|k| under.centreline_pressure_pa[k] == 0.0), "z = {z}");
             assert!(under.max_bottom_pressure_pa.is_nan() && full.max_bottom_pressure_pa.is_finite());
+            // Without the top line: everything else as the full record, bit for bit.
+            let mut no_top = StripRecord::default();
+            c.fill_record_with(&mut no_top, StripDetail::NoTopLine);
+            let n = full.n_centreline as usize;
+            let p = |r: &StripRecord| r.centreline_pressure_pa[..n].iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!((bits(&no_top), no_top.n_centreline, p(&no_top)), (bits(&full), full.n_centreline, p(&full)), "z = {z}");
+            assert_eq!(no_top.max_bottom_pressure_pa.to_bits(), full.max_bottom_pressure_pa.to_bits(), "z = {z}");
+            assert!(no_top.top_centreline_uy_m[..n].iter().all(|&u| u == 0.0) && full.top_centreline_uy_m[..n].iter().any(|&u| u != 0.0));
         }
     }
 

@@ -363,16 +363,18 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         }
         _ => None,
     };
+    // The strip record's top line only on the ticks the recording draws its scene for.
+    let top_line_every = recorder.as_ref().and_then(|r| r.scene_every());
     // [egm] enabled: the plant is an ABB robot controller speaking EGM over UDP (`egm/`),
     // instead of taking torques over iceoryx2.
     let (stats, egm) = if scenario.egm.enabled {
         let ep = crate::driver::egm::EgmParams::from_scenario(&scenario, mode, params.n_ticks)?;
         tracing::info!(sensor = %ep.sensor, "EGM: sending EgmRobot every {} s", scenario.egm.cycle_s);
-        let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode);
+        let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode).with_top_line_every(top_line_every);
         let (stats, es) = crate::driver::egm::EgmLoop::new(&scenario, &mut plant, recorder.as_mut(), ep, signals)?.run();
         (stats, Some(es))
     } else {
-        let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode);
+        let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode).with_top_line_every(top_line_every);
         let mut plant_loop = PlantLoop {
             ports: &ports,
             plant: &mut plant,

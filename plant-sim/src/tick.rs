@@ -17,6 +17,7 @@ use messages::{state_flags, ControllerDiagnostics, JointState, JointTorque, Plan
 use robot::Vec6;
 use scenarios::{Mode, Scenario};
 
+use crate::contact::StripDetail;
 use crate::gate::{Decision, Gate, GateConfig, GateEvents};
 use crate::limits::ReflexLimits;
 use crate::physics::Physics;
@@ -61,7 +62,10 @@ pub struct PlantTick {
     first: FirstTicks,
     strip: StripRecord,
     /// How much of the strip the record carries (full unless a case records nothing).
-    strip_detail: crate::contact::StripDetail,
+    strip_detail: StripDetail,
+    /// Every how many ticks a full record carries the top line (the recording's scene ticks);
+    /// None: never (no scene).
+    top_line_every: Option<u64>,
     /// `[sensor]`: the force/torque sensor's chain and this tick's reading (None: exact wrench).
     sensor: Option<Sensor>,
     /// `[drives]` with encoders: what the state reports as q and q̇ (None: exact).
@@ -131,12 +135,22 @@ impl PlantTick {
             in_end_stop: None,
             first: FirstTicks::default(),
             strip: StripRecord::default(),
-            strip_detail: crate::contact::StripDetail::Full,
+            strip_detail: StripDetail::Full,
+            top_line_every: Some(1),
         }
     }
 
+    /// Fill the strip record's top line (read only by the recording's 3D scene) on ticks that
+    /// are a multiple of `every` only, None: never; by default every tick. A driver passes its
+    /// recorder's [`recordings::Recorder::scene_every`]: the top line is about half of the
+    /// record's cost, O(nodes × modes) per tick.
+    pub fn with_top_line_every(mut self, every: Option<u64>) -> PlantTick {
+        self.top_line_every = every;
+        self
+    }
+
     /// The detail of the strip's record in each tick's outcome (default full: the recording's).
-    pub fn with_strip_detail(mut self, detail: crate::contact::StripDetail) -> PlantTick {
+    pub fn with_strip_detail(mut self, detail: StripDetail) -> PlantTick {
         self.strip_detail = detail;
         self
     }
@@ -290,7 +304,12 @@ impl PlantTick {
         self.physics.step_tick(&decision.tau);
         self.read_sensors(tick + 1, t_next, &mut events);
         self.check_limits(tick + 1, t_next, &mut events);
-        self.physics.fill_strip_record_with(&mut self.strip, self.strip_detail);
+        let detail = match (self.strip_detail, self.top_line_every) {
+            (StripDetail::Full, Some(every)) if tick.is_multiple_of(every) => StripDetail::Full,
+            (StripDetail::Full, _) => StripDetail::NoTopLine,
+            (detail, _) => detail,
+        };
+        self.physics.fill_strip_record_with(&mut self.strip, detail);
         let applied = JointTorque {
             contract_version: CONTRACT_VERSION,
             controller_status,

@@ -184,6 +184,8 @@ pub struct Recorder {
     thread: Option<JoinHandle<RecordingSummary>>,
     path: PathBuf,
     live_addr: Option<std::net::SocketAddr>,
+    /// Every how many ticks the writer draws the scene; None without one.
+    scene_every: Option<u64>,
 }
 
 type McapFile = mcap::Writer<BufWriter<SlicedFile>>;
@@ -392,11 +394,19 @@ impl Recorder {
             reserve,
             live,
         };
+        let scene_every = cfg.scene.as_ref().map(|_| writer.scene_every);
         let thread = std::thread::Builder::new()
             .name("recorder".into())
             .spawn(move || writer.run())
             .map_err(|source| RecorderError::Create { path: path.clone(), cause: source })?;
-        Ok(Self { producer: Some(producer), shared, thread: Some(thread), path, live_addr })
+        Ok(Self { producer: Some(producer), shared, thread: Some(thread), path, live_addr, scene_every })
+    }
+
+    /// Every how many ticks the writer draws the 3D scene (ticks whose `state.tick` is a
+    /// multiple of it), the only reader of a record's `top_centreline_uy_m`; None: no scene, the
+    /// top line is never read.
+    pub fn scene_every(&self) -> Option<u64> {
+        self.scene_every
     }
 
     /// Queues one tick. Wait-free; returns false (and counts a drop) if the queue is full.

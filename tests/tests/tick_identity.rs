@@ -75,3 +75,41 @@ fn in_process_runs_are_bit_identical_to_the_pinned_lockstep_digests() {
         assert_eq!(have, want, "{name}: the in-process run differs from the lockstep daemons");
     }
 }
+
+/// The plant fills the strip record's top line (read only by the recording's 3D scene) on scene
+/// ticks only (`PlantTick::with_top_line_every`, the recorder's `scene_every`): driven by the
+/// same controller, a plant doing so and one filling every tick give the same states, wrenches
+/// and pressures on every tick, bit for bit, and the same top line on the scene ticks; the
+/// other ticks' top line is zero. The default scenario through its roll (1,500 ticks).
+#[test]
+fn the_top_line_on_scene_ticks_only_changes_nothing_the_recording_reads() {
+    let s = scenarios::Scenario::load(&scenario_path("default")).unwrap();
+    let cache = strip::cache::cache_dir();
+    let every = 10;
+    let mut full = plant_sim::PlantTick::from_scenario(&s, &cache, scenarios::Mode::Lockstep).unwrap();
+    let mut decimated =
+        plant_sim::PlantTick::from_scenario(&s, &cache, scenarios::Mode::Lockstep).unwrap().with_top_line_every(Some(every));
+    let mut controller = controller::Controller::from_scenario(&s).with_id(1);
+    let mut top_seen = false;
+    for tick in 0..1500u64 {
+        let (state, wrench) = full.outputs();
+        assert_eq!(format!("{:?}", (state, wrench)), format!("{:?}", decimated.outputs()), "tick {tick}: outputs");
+        let (torque, _) = controller.process(&state, &wrench);
+        let (a, b) = (full.advance(Some(&torque)).strip, decimated.advance(Some(&torque)).strip);
+        let n = a.n_centreline as usize;
+        assert!(n > 0 && b.n_centreline as usize == n, "tick {tick}");
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&b.centreline_pressure_pa[..n]), bits(&a.centreline_pressure_pa[..n]), "tick {tick}: pressures");
+        let scalars = |r: &plant_sim::recording::StripRecord| {
+            bits(&[r.wheel_z_m, r.contact_force_n, r.bottom_force_n, r.max_bottom_pressure_pa, r.top_displacement_m])
+        };
+        assert_eq!(scalars(&b), scalars(&a), "tick {tick}: scalars");
+        if tick % every == 0 {
+            assert_eq!(bits(&b.top_centreline_uy_m[..n]), bits(&a.top_centreline_uy_m[..n]), "tick {tick}: top line");
+            top_seen |= a.top_centreline_uy_m[..n].iter().any(|&u| u != 0.0);
+        } else {
+            assert!(b.top_centreline_uy_m[..n].iter().all(|&u| u == 0.0), "tick {tick}: top line not filled");
+        }
+    }
+    assert!(top_seen, "the strip deformed under the wheel on some scene tick");
+}
