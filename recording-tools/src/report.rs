@@ -218,6 +218,13 @@ fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
     rolling_numbers_of(&tracking_ticks(rec), &crate::strip_rows::RecordedRows::of(rec))
 }
 
+impl crate::strip_rows::CaseRows {
+    /// The numbers `rig report` would print for the recording of these rows.
+    pub fn rolling_numbers(&self) -> Option<RollingNumbers> {
+        rolling_numbers_of(self.ticks(), self)
+    }
+}
+
 /// The rolling-phase numbers of tick rows as [`tracking_ticks`] gives them and their `/strip`
 /// rows (a recording's, or a case's kept in memory: [`crate::strip_rows::CaseRows`]); the same
 /// figures from either, bit for bit, as long as the rows are the recorded ones (f32 pressures).

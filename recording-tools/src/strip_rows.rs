@@ -5,7 +5,6 @@
 //! bit, without the writer's and the reader's CPU (a third of a sweep's).
 
 use crate::read::Recording;
-use crate::report::{rolling_numbers_of, RollingNumbers};
 use crate::tracking::TrackingTick;
 use recordings::{TickRecord, MAX_CENTRELINE};
 
@@ -102,14 +101,10 @@ impl CaseRows {
         self.moving_z_m.push((s.centreline_z0_m, s.centreline_dz_m));
     }
 
-    /// The tick rows as the rolling-phase metric takes them.
+    /// The tick rows as the rolling-phase metric takes them (their figures:
+    /// `CaseRows::rolling_numbers`, in `report.rs`, which reads these rows and not the reverse).
     pub fn ticks(&self) -> &[TrackingTick] {
         &self.ticks
-    }
-
-    /// The numbers `rig report` would print for the recording of these rows.
-    pub fn rolling_numbers(&self) -> Option<RollingNumbers> {
-        rolling_numbers_of(&self.ticks, self)
     }
 }
 
