@@ -311,7 +311,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
             tracing::debug!("could not set the lockstep loop's nice value to {LOCKSTEP_NICE} (needs CAP_SYS_NICE)");
         }
     }
-    if mode == Mode::Realtime && l.idle_poll {
+    // Both modes: lockstep hands over twice a tick too, and each hand-over to a halted vCPU
+    // costs its wake-up.
+    if l.idle_poll {
         match rt::hold_idle_poll() {
             Ok(()) => tracing::info!("idle CPUs poll while the plant runs (PM QoS /dev/cpu_dma_latency = 0 µs; loop.idle_poll)"),
             Err(e) => tracing::warn!("could not hold /dev/cpu_dma_latency at 0 µs ({e}): idle CPUs may halt, wake-ups cost more"),

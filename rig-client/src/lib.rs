@@ -766,9 +766,20 @@ pub mod loopback {
                     if tick == ticks {
                         break;
                     }
+                    // Wait until this tick's torque or the deadline: a wake-up may bring another
+                    // sample (the diagnostics) or none, and a plant that moved on then ran ahead
+                    // of the controller (7 of 1050 ticks unanswered, seen in CI on 2026-12-06).
                     let deadline = Instant::now() + Duration::from_millis(if tick == 0 { 5 } else { 1000 });
-                    let _ = plant.wait_torque(deadline);
-                    if plant.receive_torque_for(tick).is_some() {
+                    let got = loop {
+                        if plant.receive_torque_for(tick).is_some() {
+                            break true;
+                        }
+                        if Instant::now() >= deadline {
+                            break false;
+                        }
+                        let _ = plant.wait_torque(deadline);
+                    };
+                    if got {
                         answered += 1;
                         break;
                     }
