@@ -158,9 +158,32 @@ unsafe fn dot4_avx2(rows: [&[f64]; 4], x: &[f64]) -> [f64; 4] {
 
 #[inline(always)]
 fn dot4_portable(rows: [&[f64]; 4], x: &[f64]) -> [f64; 4] {
+    dot_rows_portable(rows, x)
+}
+
+/// [`dot`] of two rows with one `x` (the wheel's two grid rows each substep), as [`dot4`].
+#[inline]
+fn dot2(rows: [&[f64]; 2], x: &[f64]) -> [f64; 2] {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { dot2_avx2(rows, x) };
+    }
+    dot_rows_portable(rows, x)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn dot2_avx2(rows: [&[f64]; 2], x: &[f64]) -> [f64; 2] {
+    dot_rows_portable(rows, x)
+}
+
+/// N rows' [`dot_portable`] with one `x`: per row the same partial sums in the same order.
+#[inline(always)]
+fn dot_rows_portable<const N: usize>(rows: [&[f64]; N], x: &[f64]) -> [f64; N] {
     let n = rows.iter().map(|r| r.len()).fold(x.len(), usize::min);
     let full = n / 8 * 8;
-    let mut acc = [[0.0f64; 8]; 4];
+    let mut acc = [[0.0f64; 8]; N];
     for c in (0..full).step_by(8) {
         let xs = &x[c..c + 8];
         for (a, row) in acc.iter_mut().zip(rows) {
@@ -176,6 +199,56 @@ fn dot4_portable(rows: [&[f64]; 4], x: &[f64]) -> [f64; 4] {
         }
     }
     acc.map(|a| ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])))
+}
+
+/// The modal state's free step `x ← Z x` (diagonal complex `Z`), on `x` as `[Re x, Im x]`.
+/// Element by element, so the 4-wide AVX2 path gives the same bits as the 2-wide baseline one.
+#[inline]
+fn rotate(x: &mut [f64], z_re: &[f64], z_im: &[f64]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { rotate_avx2(x, z_re, z_im) };
+    }
+    rotate_portable(x, z_re, z_im)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn rotate_avx2(x: &mut [f64], z_re: &[f64], z_im: &[f64]) {
+    rotate_portable(x, z_re, z_im)
+}
+
+#[inline(always)]
+fn rotate_portable(x: &mut [f64], z_re: &[f64], z_im: &[f64]) {
+    let (x_re, x_im) = x.split_at_mut(z_re.len());
+    for (((xr, xi), zr), zi) in x_re.iter_mut().zip(x_im.iter_mut()).zip(z_re).zip(z_im) {
+        (*xr, *xi) = (zr * *xr - zi * *xi, zr * *xi + zi * *xr);
+    }
+}
+
+/// `x += a0 r0 + a1 r1`, element by element (bit-identical on either path, as [`rotate`]).
+#[inline]
+fn add_two_rows(x: &mut [f64], (a0, r0): (f64, &[f64]), (a1, r1): (f64, &[f64])) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { add_two_rows_avx2(x, (a0, r0), (a1, r1)) };
+    }
+    add_two_rows_portable(x, (a0, r0), (a1, r1))
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn add_two_rows_avx2(x: &mut [f64], r0: (f64, &[f64]), r1: (f64, &[f64])) {
+    add_two_rows_portable(x, r0, r1)
+}
+
+#[inline(always)]
+fn add_two_rows_portable(x: &mut [f64], (a0, r0): (f64, &[f64]), (a1, r1): (f64, &[f64])) {
+    for ((x, b0), b1) in x.iter_mut().zip(r0).zip(r1) {
+        *x += a0 * b0 + a1 * b1;
+    }
 }
 
 #[inline(always)]
@@ -735,12 +808,9 @@ impl StripContact {
         let lerp = |a: &[f64]| (1.0 - s) * a[g] + s * a[g + 1];
         // Free strip state at the substep end, Z x, in place; the surface under the wheel is
         // linear in the interpolated row, so it interpolates the two grid rows' outputs.
-        let m = self.tables.modes;
-        let (x_re, x_im) = self.x.split_at_mut(m);
-        for (((xr, xi), zr), zi) in x_re.iter_mut().zip(x_im.iter_mut()).zip(&self.tables.z_re).zip(&self.tables.z_im) {
-            (*xr, *xi) = (zr * *xr - zi * *xi, zr * *xi + zi * *xr);
-        }
-        let u_free = (1.0 - s) * dot(t.c_row(g), &self.x) + s * dot(t.c_row(g + 1), &self.x);
+        rotate(&mut self.x, &self.tables.z_re, &self.tables.z_im);
+        let [c0, c1] = dot2([t.c_row(g), t.c_row(g + 1)], &self.x);
+        let u_free = (1.0 - s) * c0 + s * c1;
         // One-substep compliance under the wheel (the tabulated quadratic in s).
         let d_h = lerp(&t.d_ww) + (1.0 - s) * (1.0 - s) * t.cgb_point[g] + s * (1.0 - s) * t.cgb_cross[g] + s * s * t.cgb_point[g + 1];
         let surface = STRIP_TOP_HEIGHT_M + lerp(&self.bulge_w) + u_free;
@@ -754,10 +824,7 @@ impl StripContact {
         self.force_y_n = f;
         // Step the strip: x ← Z x + γ (V⁻¹ B w) f (Z x is already in place).
         if p > 0.0 {
-            let (a0, a1) = ((1.0 - s) * f, s * f);
-            for ((x, b0), b1) in self.x.iter_mut().zip(t.gb_row(g)).zip(t.gb_row(g + 1)) {
-                *x += a0 * b0 + a1 * b1;
-            }
+            add_two_rows(&mut self.x, ((1.0 - s) * f, t.gb_row(g)), (s * f, t.gb_row(g + 1)));
         }
         // The wheel gets +p along base z at its lowest point.
         let force = Vector3::new(0.0, 0.0, p);
@@ -1139,9 +1206,10 @@ pub(crate) mod tests {
         assert!(histories[1] != histories[0] && histories[3] != histories[0], "the bump's height changes the run");
     }
 
-    /// The four-row dot product gives each row bit for bit what the single one does (the
-    /// recorded pressures must not depend on how the rows were grouped), on the AVX2 path and the
-    /// portable one, for lengths with and without a remainder.
+    /// The four- and two-row dot products give each row bit for bit what the single one does
+    /// (the recorded pressures must not depend on how the rows were grouped), on the AVX2 path and
+    /// the portable one, for lengths with and without a remainder; the substep's element-wise
+    /// steps give the same bits on both paths.
     #[test]
     fn four_row_dot_equals_the_single_row_dot_bit_for_bit() {
         for n in [0, 5, 8, 264, 267] {
@@ -1151,6 +1219,18 @@ pub(crate) mod tests {
             for (got, want) in [(dot4(rows, &x), rows.map(|r| dot(r, &x))), (dot4_portable(rows, &x), rows.map(|r| dot_portable(r, &x)))] {
                 assert!(got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "n = {n}: {got:?} vs {want:?}");
             }
+            let pair = [&r0[..], &r1[..]];
+            for got in [dot2(pair, &x), dot_rows_portable(pair, &x)] {
+                assert_eq!(got.map(f64::to_bits), pair.map(|r| dot(r, &x).to_bits()), "n = {n}");
+            }
+            // The element-wise steps: the dispatched path gives the portable path's bits.
+            let (mut a, mut b) = (x.clone(), x.clone());
+            let half = n as usize / 2;
+            rotate(&mut a, &r0[..half], &r1[..half]);
+            rotate_portable(&mut b, &r0[..half], &r1[..half]);
+            add_two_rows(&mut a, (0.3, &r2), (-1.7, &r3));
+            add_two_rows_portable(&mut b, (0.3, &r2), (-1.7, &r3));
+            assert_eq!(a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), "n = {n}");
             let direct: f64 = r2.iter().zip(&x).map(|(a, b)| a * b).sum();
             assert!((dot(&r2, &x) - direct).abs() <= 1e-12 * r2.iter().zip(&x).map(|(a, b)| (a * b).abs()).sum::<f64>());
         }

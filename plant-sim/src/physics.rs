@@ -324,6 +324,26 @@ impl Physics {
     /// exact, force implicit at the substep end) from the TCP state at the substep start; its
     /// wrench on the tool W = −F_e enters the robot as the generalized force J(q)ᵀ W held over the substep.
     pub fn step_tick(&mut self, tau_cmd: &Vec6) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            return unsafe { self.step_tick_avx2(tau_cmd) };
+        }
+        self.step_tick_portable(tau_cmd)
+    }
+
+    /// [`Physics::step_tick`] compiled for AVX2 (the rigid-body algebra inlined into it gets
+    /// 4-wide vectors). The same bits as the baseline path: AVX2 brings no fused multiply-add and
+    /// Rust lets the compiler neither contract nor reorder floating-point operations
+    /// (`tests/tests/tick_identity.rs` pins the digests).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn step_tick_avx2(&mut self, tau_cmd: &Vec6) {
+        self.step_tick_portable(tau_cmd)
+    }
+
+    #[inline(always)]
+    fn step_tick_portable(&mut self, tau_cmd: &Vec6) {
         let h = self.dt_sub_s;
         // The drives apply the command through their torque constants.
         let applied = self.friction.as_ref().map(|f| f.applied(tau_cmd));
