@@ -119,63 +119,46 @@ struct WheelTable {
     d_tcl: Vec<f64>,
 }
 
-/// Real dot product with 8 independent partial sums combined in a fixed order: vectorized (AVX2
-/// where the CPU has it), and the result does not depend on the vector width (no FMA, same
-/// order of operations), so runs stay bit-reproducible across the two code paths.
-#[inline]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { dot_avx2(a, b) };
-    }
-    dot_portable(a, b)
+/// A function with a baseline body (`$portable`, `#[inline(always)]`) and an AVX2 copy of it,
+/// chosen at run time. Each body here is element-wise or keeps its partial sums in a fixed order,
+/// and AVX2 brings no fused multiply-add: both paths give the same bits.
+macro_rules! avx2_dispatch {
+    ($(#[$doc:meta])* fn $name:ident / $avx2:ident ($($arg:ident: $ty:ty),*) $(-> $ret:ty)? = $portable:ident) => {
+        $(#[$doc])*
+        #[inline]
+        fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { $avx2($($arg),*) };
+            }
+            $portable($($arg),*)
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        unsafe fn $avx2($($arg: $ty),*) $(-> $ret)? {
+            $portable($($arg),*)
+        }
+    };
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn dot_avx2(a: &[f64], b: &[f64]) -> f64 {
-    dot_portable(a, b)
+avx2_dispatch! {
+    /// Real dot product with 8 independent partial sums combined in a fixed order: vectorized
+    /// (AVX2 where the CPU has it), and the result does not depend on the vector width (no FMA,
+    /// same order of operations), so runs stay bit-reproducible across the two code paths.
+    fn dot / dot_avx2 (a: &[f64], b: &[f64]) -> f64 = dot_portable
 }
 
-/// [`dot`] of four rows of equal length with one `x`: each row's result is bit-identical to
-/// `dot(row, x)` (same partial sums, same order); `x` is loaded once for the four rows.
-#[inline]
-fn dot4(rows: [&[f64]; 4], x: &[f64]) -> [f64; 4] {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { dot4_avx2(rows, x) };
-    }
-    dot4_portable(rows, x)
+avx2_dispatch! {
+    /// [`dot`] of four rows of equal length with one `x`: each row's result is bit-identical to
+    /// `dot(row, x)` (same partial sums, same order); `x` is loaded once for the four rows.
+    fn dot4 / dot4_avx2 (rows: [&[f64]; 4], x: &[f64]) -> [f64; 4] = dot_rows_portable
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn dot4_avx2(rows: [&[f64]; 4], x: &[f64]) -> [f64; 4] {
-    dot4_portable(rows, x)
-}
-
-#[inline(always)]
-fn dot4_portable(rows: [&[f64]; 4], x: &[f64]) -> [f64; 4] {
-    dot_rows_portable(rows, x)
-}
-
-/// [`dot`] of two rows with one `x` (the wheel's two grid rows each substep), as [`dot4`].
-#[inline]
-fn dot2(rows: [&[f64]; 2], x: &[f64]) -> [f64; 2] {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { dot2_avx2(rows, x) };
-    }
-    dot_rows_portable(rows, x)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn dot2_avx2(rows: [&[f64]; 2], x: &[f64]) -> [f64; 2] {
-    dot_rows_portable(rows, x)
+avx2_dispatch! {
+    /// [`dot`] of two rows with one `x` (the wheel's two grid rows each substep), as [`dot4`].
+    fn dot2 / dot2_avx2 (rows: [&[f64]; 2], x: &[f64]) -> [f64; 2] = dot_rows_portable
 }
 
 /// N rows' [`dot_portable`] with one `x`: per row the same partial sums in the same order.
@@ -201,22 +184,10 @@ fn dot_rows_portable<const N: usize>(rows: [&[f64]; N], x: &[f64]) -> [f64; N] {
     acc.map(|a| ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])))
 }
 
-/// The modal state's free step `x ← Z x` (diagonal complex `Z`), on `x` as `[Re x, Im x]`.
-/// Element by element, so the 4-wide AVX2 path gives the same bits as the 2-wide baseline one.
-#[inline]
-fn rotate(x: &mut [f64], z_re: &[f64], z_im: &[f64]) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { rotate_avx2(x, z_re, z_im) };
-    }
-    rotate_portable(x, z_re, z_im)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn rotate_avx2(x: &mut [f64], z_re: &[f64], z_im: &[f64]) {
-    rotate_portable(x, z_re, z_im)
+avx2_dispatch! {
+    /// The modal state's free step `x ← Z x` (diagonal complex `Z`), on `x` as `[Re x, Im x]`.
+    /// Element by element, so the 4-wide AVX2 path gives the same bits as the 2-wide baseline one.
+    fn rotate / rotate_avx2 (x: &mut [f64], z_re: &[f64], z_im: &[f64]) = rotate_portable
 }
 
 #[inline(always)]
@@ -227,21 +198,9 @@ fn rotate_portable(x: &mut [f64], z_re: &[f64], z_im: &[f64]) {
     }
 }
 
-/// `x += a0 r0 + a1 r1`, element by element (bit-identical on either path, as [`rotate`]).
-#[inline]
-fn add_two_rows(x: &mut [f64], (a0, r0): (f64, &[f64]), (a1, r1): (f64, &[f64])) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { add_two_rows_avx2(x, (a0, r0), (a1, r1)) };
-    }
-    add_two_rows_portable(x, (a0, r0), (a1, r1))
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn add_two_rows_avx2(x: &mut [f64], r0: (f64, &[f64]), r1: (f64, &[f64])) {
-    add_two_rows_portable(x, r0, r1)
+avx2_dispatch! {
+    /// `x += a0 r0 + a1 r1`, element by element (bit-identical on either path, as [`rotate`]).
+    fn add_two_rows / add_two_rows_avx2 (x: &mut [f64], r0: (f64, &[f64]), r1: (f64, &[f64])) = add_two_rows_portable
 }
 
 #[inline(always)]
@@ -1216,7 +1175,9 @@ pub(crate) mod tests {
             let v = |seed: f64| -> Vec<f64> { (0..n).map(|i| ((i as f64 + seed) * 0.7).sin() * 10f64.powi(i % 7 - 3)).collect() };
             let (x, r0, r1, r2, r3) = (v(0.1), v(1.3), v(2.9), v(4.4), v(5.5));
             let rows = [&r0[..], &r1[..], &r2[..], &r3[..]];
-            for (got, want) in [(dot4(rows, &x), rows.map(|r| dot(r, &x))), (dot4_portable(rows, &x), rows.map(|r| dot_portable(r, &x)))] {
+            for (got, want) in
+                [(dot4(rows, &x), rows.map(|r| dot(r, &x))), (dot_rows_portable(rows, &x), rows.map(|r| dot_portable(r, &x)))]
+            {
                 assert!(got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "n = {n}: {got:?} vs {want:?}");
             }
             let pair = [&r0[..], &r1[..]];
