@@ -232,10 +232,7 @@ impl ChainContact {
         // Free motion of every live window, and its surface under the wheel where it covers it.
         let mut u_free = 0.0;
         for s in self.slots.iter_mut().filter(|s| s.live) {
-            let (x_re, x_im) = s.x.split_at_mut(m);
-            for (((xr, xi), zr), zi) in x_re.iter_mut().zip(x_im.iter_mut()).zip(&tables.z_re).zip(&tables.z_im) {
-                (*xr, *xi) = (zr * *xr - zi * *xi, zr * *xi + zi * *xr);
-            }
+            super::rotate(&mut s.x[..2 * m], &tables.z_re, &tables.z_im);
             let local = self.z_a_m - self.chain.offsets_m[s.window];
             if (0.0..=lw).contains(&local) {
                 let (g, f) = t.locate(local);
