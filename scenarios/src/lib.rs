@@ -15,6 +15,7 @@ mod cell;
 mod check;
 pub mod fields;
 pub use cell::{DrivesConfig, MismatchConfig, SensorConfig};
+pub mod contour;
 pub mod geometry;
 
 /// Where a value of a scenario comes from, for messages.

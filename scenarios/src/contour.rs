@@ -1,0 +1,430 @@
+//! A planar contour on the substrate (issue 26, DESIGN section 15): straight lines and circular
+//! arcs, each continuing the tangent of the one before, so the tangent is continuous by
+//! construction; a closed contour must also meet its own start with the start's tangent. The
+//! reference of a contour run is the path `r(s)` of this module composed with a time law `s(t)`
+//! (Drake's path × time law), so everything here is a function of the arc length s.
+//!
+//! Frames: the contour lies in the substrate's plane, a level table (its normal is base +z), in
+//! base x and y (m). The heading is the tangent's angle from base +x towards base +y
+//! (counter-clockwise seen from above); an arc with a positive turn bends to the left. The moving
+//! frame at s is the task frame of a straight strip laid along the tangent there: task z the
+//! tangent, task y the substrate normal (base +z), task x the lateral direction to the left.
+//!
+//! Not yet used by a run: the controller's reference, the plant's contact along the contour and
+//! the reach check are the rest of issue 26.
+
+use std::f64::consts::TAU;
+
+/// One piece of a contour, continuing the previous piece's end point and tangent.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Piece {
+    /// A straight line this long, m.
+    Line { length_m: f64 },
+    /// A circular arc of this radius (m) that turns the tangent by `turn_rad` (positive: to the
+    /// left); its length is `radius_m · |turn_rad|`.
+    Arc { radius_m: f64, turn_rad: f64 },
+}
+
+impl Piece {
+    /// Arc length of the piece, m.
+    pub fn length_m(&self) -> f64 {
+        match *self {
+            Piece::Line { length_m } => length_m,
+            Piece::Arc { radius_m, turn_rad } => radius_m * turn_rad.abs(),
+        }
+    }
+
+    /// Signed curvature, 1/m (positive when the piece bends to the left).
+    pub fn curvature_per_m(&self) -> f64 {
+        match *self {
+            Piece::Line { .. } => 0.0,
+            Piece::Arc { radius_m, turn_rad } => turn_rad.signum() / radius_m,
+        }
+    }
+}
+
+/// A point of the contour with its moving frame's heading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContourPoint {
+    /// Arc length from the contour's start, m.
+    pub s_m: f64,
+    /// Position in the substrate plane, base x and y, m.
+    pub xy_base_m: [f64; 2],
+    /// Tangent's angle from base +x towards base +y, rad.
+    pub heading_rad: f64,
+    /// Signed curvature, 1/m (positive: bending to the left).
+    pub curvature_per_m: f64,
+    /// Index of the piece the point lies on.
+    pub piece: usize,
+}
+
+impl ContourPoint {
+    /// The unit tangent (task z of the moving frame), base x and y.
+    pub fn tangent(&self) -> [f64; 2] {
+        [self.heading_rad.cos(), self.heading_rad.sin()]
+    }
+
+    /// The unit lateral direction to the left (task x of the moving frame), base x and y.
+    pub fn left(&self) -> [f64; 2] {
+        [-self.heading_rad.sin(), self.heading_rad.cos()]
+    }
+}
+
+/// Why a contour was refused, and which piece (its index in the file's list) or field it is.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContourError {
+    /// The offending piece's index, or None for the contour as a whole (its closure).
+    pub piece: Option<usize>,
+    /// What is wrong, worded to follow the piece's or the contour's name.
+    pub why: String,
+}
+
+impl std::fmt::Display for ContourError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.piece {
+            Some(i) => write!(f, "piece {i}: {}", self.why),
+            None => write!(f, "the contour: {}", self.why),
+        }
+    }
+}
+
+/// How far (m) and how much turned (rad) a closed contour's end may be from its start: far below
+/// anything the wheel or the strip resolve, far above the rounding of summing the pieces.
+pub const CLOSURE_TOLERANCE_M: f64 = 1e-6;
+pub const CLOSURE_TOLERANCE_RAD: f64 = 1e-6;
+
+/// A contour: a start pose and its pieces, with each piece's start (arc length, point, heading)
+/// precomputed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Contour {
+    pieces: Vec<Piece>,
+    /// Per piece: arc length, point and heading at its start.
+    starts: Vec<(f64, [f64; 2], f64)>,
+    length_m: f64,
+    closed: bool,
+}
+
+impl Contour {
+    /// The contour from `start_xy_base_m` with heading `start_heading_rad` through `pieces`,
+    /// refused when a piece has no length (or not a finite one), an arc's radius is below
+    /// `min_radius_m` (what the wheel can follow) or it turns by 2π or more, or, when `closed`,
+    /// the end misses the start ([`CLOSURE_TOLERANCE_M`]) or meets it at another tangent (a
+    /// tangent jump, [`CLOSURE_TOLERANCE_RAD`]).
+    pub fn new(
+        start_xy_base_m: [f64; 2],
+        start_heading_rad: f64,
+        pieces: &[Piece],
+        closed: bool,
+        min_radius_m: f64,
+    ) -> Result<Contour, ContourError> {
+        let bad = |i: usize, why: String| ContourError { piece: Some(i), why };
+        if pieces.is_empty() {
+            return Err(ContourError { piece: None, why: "has no pieces".into() });
+        }
+        let mut starts = Vec::with_capacity(pieces.len());
+        let (mut s, mut p, mut h) = (0.0, start_xy_base_m, start_heading_rad);
+        for (i, piece) in pieces.iter().enumerate() {
+            match *piece {
+                Piece::Line { length_m } => {
+                    if !(length_m.is_finite() && length_m > 0.0) {
+                        return Err(bad(i, format!("a line of length {length_m} m: a piece must have a positive length")));
+                    }
+                }
+                Piece::Arc { radius_m, turn_rad } => {
+                    if !(radius_m.is_finite() && radius_m >= min_radius_m) {
+                        return Err(bad(
+                            i,
+                            format!("an arc of radius {:.1} mm: the wheel follows {:.1} mm or more", radius_m * 1e3, min_radius_m * 1e3),
+                        ));
+                    }
+                    if !(turn_rad.is_finite() && turn_rad != 0.0) {
+                        return Err(bad(i, format!("an arc turning by {turn_rad} rad: a piece must have a positive length")));
+                    }
+                    if turn_rad.abs() >= TAU {
+                        return Err(bad(i, format!("an arc turning by {:.1}°: one piece turns by less than 360°", turn_rad.to_degrees())));
+                    }
+                }
+            }
+            starts.push((s, p, h));
+            (p, h) = end_of(piece, p, h, piece.length_m());
+            s += piece.length_m();
+        }
+        if closed {
+            let gap = ((p[0] - start_xy_base_m[0]).powi(2) + (p[1] - start_xy_base_m[1]).powi(2)).sqrt();
+            if gap > CLOSURE_TOLERANCE_M {
+                return Err(ContourError { piece: None, why: format!("is closed but its end is {:.3} mm from its start", gap * 1e3) });
+            }
+            let jump = wrap_pi(h - start_heading_rad);
+            if jump.abs() > CLOSURE_TOLERANCE_RAD {
+                return Err(ContourError {
+                    piece: None,
+                    why: format!("is closed but its tangent jumps by {:.3}° where it meets its start", jump.to_degrees()),
+                });
+            }
+        }
+        Ok(Contour { pieces: pieces.to_vec(), starts, length_m: s, closed })
+    }
+
+    /// A closed rounded rectangle, `width_m` along the start heading and `height_m` across it, with
+    /// corner radius `radius_m`, run counter-clockwise from the middle of a long side: what a
+    /// sunroof opening's edge looks like (issue 26's `scenarios/sunroof.toml`).
+    pub fn rounded_rectangle(
+        mid_side_xy_base_m: [f64; 2],
+        heading_rad: f64,
+        width_m: f64,
+        height_m: f64,
+        radius_m: f64,
+        min_radius_m: f64,
+    ) -> Result<Contour, ContourError> {
+        let (w, h) = (width_m - 2.0 * radius_m, height_m - 2.0 * radius_m);
+        let quarter = Piece::Arc { radius_m, turn_rad: TAU / 4.0 };
+        let mut pieces = vec![Piece::Line { length_m: w / 2.0 }];
+        for side in [h, w, h] {
+            pieces.extend([quarter, Piece::Line { length_m: side }]);
+        }
+        pieces.extend([quarter, Piece::Line { length_m: w / 2.0 }]);
+        Contour::new(mid_side_xy_base_m, heading_rad, &pieces, true, min_radius_m)
+    }
+
+    /// Total arc length, m.
+    pub fn length_m(&self) -> f64 {
+        self.length_m
+    }
+
+    pub fn is_closed(&self) -> bool {
+        self.closed
+    }
+
+    pub fn pieces(&self) -> &[Piece] {
+        &self.pieces
+    }
+
+    /// Arc length at which piece `i` starts, m.
+    pub fn piece_start_m(&self, i: usize) -> f64 {
+        self.starts[i].0
+    }
+
+    /// The point at arc length `s_m`: a closed contour wraps around (a run that overlaps its start
+    /// goes on round), an open one is held at its ends.
+    pub fn at(&self, s_m: f64) -> ContourPoint {
+        let s = if self.closed { s_m.rem_euclid(self.length_m) } else { s_m.clamp(0.0, self.length_m) };
+        // The last piece starting at or before s.
+        let i = self.starts.partition_point(|st| st.0 <= s).saturating_sub(1);
+        let (s0, p0, h0) = self.starts[i];
+        let piece = &self.pieces[i];
+        let (xy, heading) = end_of(piece, p0, h0, (s - s0).min(piece.length_m()));
+        ContourPoint { s_m: s, xy_base_m: xy, heading_rad: heading, curvature_per_m: piece.curvature_per_m(), piece: i }
+    }
+
+    /// The nearest point of the contour to `xy_base_m`: its arc length and the signed lateral
+    /// offset of `xy_base_m` from it along the moving frame's task x (positive to the left).
+    /// Where two pieces are equally near (a corner's centre), the first one in the list is taken.
+    pub fn project(&self, xy_base_m: [f64; 2]) -> (f64, f64) {
+        let mut best: Option<(f64, f64, f64)> = None;
+        for (i, piece) in self.pieces.iter().enumerate() {
+            let (s0, p0, h0) = self.starts[i];
+            let a = nearest_along(piece, p0, h0, xy_base_m);
+            let (foot, h) = end_of(piece, p0, h0, a);
+            let d = [xy_base_m[0] - foot[0], xy_base_m[1] - foot[1]];
+            let dist = d[0].hypot(d[1]);
+            if best.is_none_or(|b| dist < b.0) {
+                best = Some((dist, s0 + a, -d[0] * h.sin() + d[1] * h.cos()));
+            }
+        }
+        let (_, s, lateral) = best.expect("a contour has pieces");
+        (s, lateral)
+    }
+
+    /// The highest speed (m/s) at arc length `s_m` at which the lateral acceleration `v² κ` stays
+    /// within `lateral_accel_mps2`: the time law's rule for slowing down in arcs (unbounded on a
+    /// line).
+    pub fn speed_limit_mps(&self, s_m: f64, lateral_accel_mps2: f64) -> f64 {
+        let k = self.at(s_m).curvature_per_m.abs();
+        if k == 0.0 {
+            f64::INFINITY
+        } else {
+            (lateral_accel_mps2 / k).sqrt()
+        }
+    }
+}
+
+/// Point and heading a distance `a_m` (0 ≤ a ≤ the piece's length) into `piece` from `(p, h)`.
+fn end_of(piece: &Piece, p: [f64; 2], h: f64, a_m: f64) -> ([f64; 2], f64) {
+    match *piece {
+        Piece::Line { .. } => ([p[0] + a_m * h.cos(), p[1] + a_m * h.sin()], h),
+        Piece::Arc { radius_m, turn_rad } => {
+            let side = turn_rad.signum();
+            let dh = side * a_m / radius_m;
+            // Chord form: exact for any turn, no centre needed.
+            let (s, c) = (h + dh).sin_cos();
+            let (s0, c0) = h.sin_cos();
+            ([p[0] + side * radius_m * (s - s0), p[1] - side * radius_m * (c - c0)], h + dh)
+        }
+    }
+}
+
+/// The distance into `piece` (starting at `(p, h)`) of its point nearest to `xy`.
+fn nearest_along(piece: &Piece, p: [f64; 2], h: f64, xy: [f64; 2]) -> f64 {
+    let d = [xy[0] - p[0], xy[1] - p[1]];
+    match *piece {
+        Piece::Line { length_m } => (d[0] * h.cos() + d[1] * h.sin()).clamp(0.0, length_m),
+        Piece::Arc { radius_m, turn_rad } => {
+            let side = turn_rad.signum();
+            // The centre, on the side the arc bends to; the angle swept from the start radius to
+            // xy's, counted in the turn's sense, in [0, 2π).
+            let c = [p[0] - side * radius_m * h.sin(), p[1] + side * radius_m * h.cos()];
+            let (r0, r) = ([p[0] - c[0], p[1] - c[1]], [xy[0] - c[0], xy[1] - c[1]]);
+            let phi = (side * (r0[0] * r[1] - r0[1] * r[0]).atan2(r0[0] * r[0] + r0[1] * r[1])).rem_euclid(TAU);
+            let total = turn_rad.abs();
+            if phi <= total {
+                return radius_m * phi;
+            }
+            // Outside the arc's sweep: the nearer of its two ends.
+            let end = end_of(piece, p, h, radius_m * total).0;
+            if (xy[0] - end[0]).hypot(xy[1] - end[1]) < d[0].hypot(d[1]) {
+                radius_m * total
+            } else {
+                0.0
+            }
+        }
+    }
+}
+
+/// `a` wrapped into (−π, π].
+fn wrap_pi(a: f64) -> f64 {
+    let w = a.rem_euclid(TAU);
+    if w > TAU / 2.0 {
+        w - TAU
+    } else {
+        w
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    const MIN_R: f64 = 0.02;
+
+    /// The sunroof's opening of issue 26: 400 x 250 mm, corners of 50 mm.
+    fn sunroof() -> Contour {
+        Contour::rounded_rectangle([0.9, 0.1], 0.3, 0.4, 0.25, 0.05, MIN_R).unwrap()
+    }
+
+    fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+        (a[0] - b[0]).hypot(a[1] - b[1])
+    }
+
+    /// A circle of four quarter arcs (either sense): length 2πR, every point R from the centre,
+    /// closed with its start's tangent.
+    #[test]
+    fn a_circle_of_quarter_arcs_is_a_circle() {
+        for (turn, side) in [(PI / 2.0, 1.0), (-PI / 2.0, -1.0)] {
+            let r = 0.07;
+            let c = Contour::new([0.8, -0.2], 1.0, &[Piece::Arc { radius_m: r, turn_rad: turn }; 4], true, MIN_R).unwrap();
+            assert!((c.length_m() - TAU * r).abs() < 1e-15);
+            let centre = [0.8 - side * r * 1.0f64.sin(), -0.2 + side * r * 1.0f64.cos()];
+            for k in 0..100 {
+                let p = c.at(k as f64 * c.length_m() / 100.0);
+                assert!((dist(p.xy_base_m, centre) - r).abs() < 1e-15, "{p:?}");
+                assert_eq!(p.curvature_per_m, side / r);
+            }
+        }
+    }
+
+    /// The rounded rectangle's length is its straight sides plus one circle, 2(w − 2r) + 2(h − 2r)
+    /// + 2πr; it closes; its extent is w by h.
+    #[test]
+    fn the_rounded_rectangle_has_its_closed_form_length_and_extent() {
+        let c = Contour::rounded_rectangle([0.0, 0.0], 0.0, 0.4, 0.25, 0.05, MIN_R).unwrap();
+        assert!((c.length_m() - (2.0 * 0.3 + 2.0 * 0.15 + TAU * 0.05)).abs() < 1e-14);
+        let pts: Vec<[f64; 2]> = (0..4000).map(|k| c.at(k as f64 * c.length_m() / 4000.0).xy_base_m).collect();
+        let (min_x, max_x) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p[0]), b.max(p[0])));
+        let (min_y, max_y) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p[1]), b.max(p[1])));
+        // Started in the middle of the long side along +x, running counter-clockwise: above it.
+        assert!((min_x + 0.2).abs() < 1e-6 && (max_x - 0.2).abs() < 1e-6, "{min_x} {max_x}");
+        assert!(min_y.abs() < 1e-12 && (max_y - 0.25).abs() < 1e-6, "{min_y} {max_y}");
+    }
+
+    /// The heading is the derivative of the position and the curvature that of the heading
+    /// (central differences, away from the pieces' joints); position and heading are continuous
+    /// across every joint.
+    #[test]
+    fn heading_and_curvature_are_the_derivatives_of_the_path() {
+        let c = sunroof();
+        let e = 1e-6;
+        for k in 0..997 {
+            let s = (k as f64 + 0.5) * c.length_m() / 997.0;
+            let (a, p, b) = (c.at(s - e), c.at(s), c.at(s + e));
+            if a.piece != b.piece {
+                continue;
+            }
+            let t = [(b.xy_base_m[0] - a.xy_base_m[0]) / (2.0 * e), (b.xy_base_m[1] - a.xy_base_m[1]) / (2.0 * e)];
+            assert!(dist(t, p.tangent()) < 1e-8, "s {s}: {t:?} vs {:?}", p.tangent());
+            let k_fd = (b.heading_rad - a.heading_rad) / (2.0 * e);
+            assert!((k_fd - p.curvature_per_m).abs() < 1e-6, "s {s}: {k_fd} vs {}", p.curvature_per_m);
+        }
+        for i in 1..c.pieces().len() {
+            let s = c.piece_start_m(i);
+            let (a, b) = (c.at(s - 1e-12), c.at(s));
+            assert!(dist(a.xy_base_m, b.xy_base_m) < 1e-11 && (a.heading_rad - b.heading_rad).abs() < 1e-9, "joint {i}");
+        }
+    }
+
+    /// A point set off the contour by d along the moving frame's left projects back to the same
+    /// arc length with lateral offset d, on lines and arcs, inside and outside the corners (|d|
+    /// below the corner radius); a closed contour wraps past its length.
+    #[test]
+    fn projecting_an_offset_point_gives_back_its_arc_length_and_offset() {
+        let c = sunroof();
+        for k in 0..500 {
+            let s = (k as f64 + 0.3) * c.length_m() / 500.0;
+            let p = c.at(s);
+            for d in [-0.02, -0.001, 0.0, 0.004, 0.03] {
+                let l = p.left();
+                let (sp, lat) = c.project([p.xy_base_m[0] + d * l[0], p.xy_base_m[1] + d * l[1]]);
+                assert!((sp - s).abs() < 1e-9 && (lat - d).abs() < 1e-12, "s {s} d {d}: ({sp}, {lat})");
+            }
+        }
+        assert!((c.at(c.length_m() + 0.01).s_m - 0.01).abs() < 1e-12);
+        assert_eq!(c.at(c.length_m() + 0.01).xy_base_m, c.at(0.01).xy_base_m);
+    }
+
+    /// Bad pieces are refused naming the piece: zero length, a radius below the wheel's, a whole
+    /// turn; a closed contour that misses its start or meets it at another tangent.
+    #[test]
+    fn bad_contours_are_refused_naming_the_piece_or_the_closure() {
+        let line = |l: f64| Piece::Line { length_m: l };
+        let arc = |r: f64, t: f64| Piece::Arc { radius_m: r, turn_rad: t };
+        let refused = |pieces: &[Piece], closed: bool| Contour::new([0.9, 0.0], 0.0, pieces, closed, MIN_R).unwrap_err();
+        assert_eq!(refused(&[line(0.1), line(0.0)], false).piece, Some(1));
+        assert_eq!(refused(&[line(0.1), arc(0.05, 0.0)], false).piece, Some(1));
+        let e = refused(&[line(0.1), arc(0.01, 1.0)], false);
+        assert_eq!(e.piece, Some(1));
+        assert!(e.why.contains("radius 10.0 mm") && e.why.contains("20.0 mm"), "{e}");
+        assert_eq!(refused(&[arc(0.05, TAU)], false).piece, Some(0));
+        assert_eq!(refused(&[line(f64::NAN)], false).piece, Some(0));
+        assert!(refused(&[], false).why.contains("no pieces"));
+        let e = refused(&[arc(0.05, PI), line(0.0001), arc(0.05, PI)], true);
+        assert_eq!(e.piece, None);
+        assert!(e.why.contains("0.100 mm from its start"), "{e}");
+        // An alpha: a line, three quarters of a circle of the line's length, the line again, back
+        // through the start point but heading across the start's tangent.
+        let r = 0.1;
+        let e = refused(&[line(r), arc(r, 1.5 * PI), line(r)], true);
+        assert!(e.why.contains("tangent jumps by -90.000°"), "{e}");
+        assert!(Contour::new([0.9, 0.0], 0.0, &[line(r), arc(r, 1.5 * PI), line(r)], false, MIN_R).is_ok());
+        assert!(Contour::new([0.9, 0.0], 0.0, &[arc(r, PI), arc(r, PI)], true, MIN_R).is_ok());
+    }
+
+    /// The time law's limit: v² κ at the limit is the lateral acceleration given; lines have none.
+    #[test]
+    fn the_speed_limit_holds_the_lateral_acceleration() {
+        let c = sunroof();
+        let in_corner = c.piece_start_m(1) + 0.01;
+        let v = c.speed_limit_mps(in_corner, 0.5);
+        assert!((v * v / 0.05 - 0.5).abs() < 1e-12, "{v}");
+        assert_eq!(c.speed_limit_mps(0.01, 0.5), f64::INFINITY);
+    }
+}
