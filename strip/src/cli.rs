@@ -149,6 +149,27 @@ pub enum Command {
         #[arg(long, default_value_t = 36.0)]
         judge_to_mm: f64,
     },
+    /// What a contour's curvature does to the pressure under the wheel (issue 26): the full FE
+    /// strip in statics, bonded everywhere, straight and bent about its normal along a circle of
+    /// the given radius (the inside of the bend at +x), the wheel rolled along the centre line.
+    /// The loop's strip neglects the curvature; this measures what that costs.
+    Curvature {
+        #[command(flatten)]
+        model: ModelArgs,
+        /// Bend radius of the strip's centre line (mm): the smallest of the contour.
+        #[arg(long, default_value_t = 50.0)]
+        radius_mm: f64,
+        /// Wheel force (N, pressing magnitude).
+        #[arg(long, default_value_t = 10.0)]
+        force_n: f64,
+        /// Wheel travel (mm): from, to, and the sampling step.
+        #[arg(long, default_value_t = 4.0)]
+        from_mm: f64,
+        #[arg(long, default_value_t = 36.0)]
+        to_mm: f64,
+        #[arg(long, default_value_t = 1.0)]
+        step_mm: f64,
+    },
     /// Export A, B, C, D, node coordinates and the input/output maps as NumPy .npz.
     Export {
         #[command(flatten)]
@@ -207,6 +228,9 @@ pub fn run(cmd: Command) -> anyhow::Result<()> {
         Command::Bond { model, force_n, from_mm, to_mm, step_mm, judge_from_mm, judge_to_mm } => {
             bond(&model.to_params()?, force_n, [from_mm, to_mm, step_mm], [judge_from_mm, judge_to_mm])?;
         }
+        Command::Curvature { model, radius_mm, force_n, from_mm, to_mm, step_mm } => {
+            curvature(&model.to_params()?, radius_mm * 1e-3, force_n, [from_mm, to_mm, step_mm])?;
+        }
         Command::Export { model, npz } => {
             let p = model.to_params()?;
             let m = StripModel::load_or_build(&p)?;
@@ -217,10 +241,9 @@ pub fn run(cmd: Command) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `rig model bond`: prints the table and the weakest node of each support.
-fn bond(p: &StripParams, force_n: f64, roll_mm: [f64; 3], judged_mm: [f64; 2]) -> anyhow::Result<()> {
-    use crate::laying::{bond_check, bonded_min_force, BottomSupport, LayingModel};
-    use crate::report::BOND_PRESSURE_PA;
+/// The statics commands' wheel: a pressing force (N, positive) and a roll `[from, to, step]` (mm)
+/// within the strip, the roll returned in m.
+fn roll_in_m(p: &StripParams, force_n: f64, roll_mm: [f64; 3]) -> anyhow::Result<[f64; 3]> {
     if !(force_n.is_finite() && force_n > 0.0) {
         anyhow::bail!("--force-n {force_n}: give the pressing force as a positive number of newtons");
     }
@@ -228,6 +251,14 @@ fn bond(p: &StripParams, force_n: f64, roll_mm: [f64; 3], judged_mm: [f64; 2]) -
     if !(step > 0.0 && from < to && from >= 0.0 && to <= p.length_m) {
         anyhow::bail!("--from-mm/--to-mm/--step-mm {roll_mm:?}: need 0 <= from < to <= strip length and step > 0");
     }
+    Ok([from, to, step])
+}
+
+/// `rig model bond`: prints the table and the weakest node of each support.
+fn bond(p: &StripParams, force_n: f64, roll_mm: [f64; 3], judged_mm: [f64; 2]) -> anyhow::Result<()> {
+    use crate::laying::{bond_check, bonded_min_force, BottomSupport, LayingModel};
+    use crate::report::BOND_PRESSURE_PA;
+    let [from, to, step] = roll_in_m(p, force_n, roll_mm)?;
     let _progress = crate::progress::Progress::start("bond");
     let m = LayingModel::build(p)?;
     let (bonded, _) = bond_check(&m, -force_n, BottomSupport::BondedEverywhere, from, to, step)?;
@@ -259,5 +290,80 @@ fn bond(p: &StripParams, force_n: f64, roll_mm: [f64; 3], judged_mm: [f64; 2]) -
         share(&front)
     );
     println!("  bonded everywhere needs a constant {:.2} N (set by z = {:.1} mm)", most.1, most.0 * 1e3);
+    Ok(())
+}
+
+/// `rig model curvature`: the centre line's pressure under the wheel and the section's largest
+/// bottom pressure there, straight and bent, per wheel position, and the largest differences.
+fn curvature(p: &StripParams, radius_m: f64, force_n: f64, roll_mm: [f64; 3]) -> anyhow::Result<()> {
+    use crate::laying::{BottomSupport, LayingModel};
+    if !(radius_m.is_finite() && radius_m > crate::mesh::HALF_WIDTH_M) {
+        anyhow::bail!(
+            "--radius-mm {}: give a radius larger than the strip's half width ({} mm)",
+            radius_m * 1e3,
+            crate::mesh::HALF_WIDTH_M * 1e3
+        );
+    }
+    let [from, to, step] = roll_in_m(p, force_n, roll_mm)?;
+    let _progress = crate::progress::Progress::start("curvature");
+    let (straight, bent) = (LayingModel::build(p)?, LayingModel::build_bent(p, Some(radius_m))?);
+    let line = straight.centre_line();
+    let per = line.get(1).map_or(1, |b| b.0 - line[0].0);
+    // Per wheel position: z, and the centre-line and section-maximum pressures, straight and bent.
+    struct Row {
+        z_m: f64,
+        centre_pa: [f64; 2],
+        section_max_pa: [f64; 2],
+    }
+    let mut rows = Vec::new();
+    let mut z = from;
+    while z <= to + 1e-12 {
+        let (a, b) =
+            (straight.solve(z, -force_n, BottomSupport::BondedEverywhere)?, bent.solve(z, -force_n, BottomSupport::BondedEverywhere)?);
+        // the centre-line node nearest the wheel, and its layer across the section
+        let &(i, _) = line.iter().min_by(|x, y| (x.1 - z).abs().total_cmp(&(y.1 - z).abs())).expect("a centre line");
+        let layer = i / per * per..i / per * per + per;
+        let max = |v: &[f64]| v[layer.clone()].iter().fold(f64::MIN, |m, &x| m.max(x));
+        rows.push(Row {
+            z_m: z,
+            centre_pa: [a.pressure_pa[i], b.pressure_pa[i]],
+            section_max_pa: [max(&a.pressure_pa), max(&b.pressure_pa)],
+        });
+        z += step;
+    }
+    drop(_progress);
+    println!(
+        "bottom pressure under a {force_n} N wheel, strip straight and bent along R = {:.1} mm (bonded everywhere; bump {:.3} mm high at z = {:.1} mm)",
+        radius_m * 1e3,
+        p.bulge_amplitude_m * 1e3,
+        p.bulge_center_m * 1e3
+    );
+    println!(
+        "{:>7} {:>22} {:>20} {:>9} {:>24} {:>22} {:>9}",
+        "z (mm)", "centre, straight (kPa)", "centre, bent (kPa)", "diff %", "section max, straight", "section max, bent", "diff %"
+    );
+    let pct = |[a, b]: [f64; 2]| 100.0 * (b - a) / a;
+    for r in &rows {
+        let ([cs, cb], [ms, mb]) = (r.centre_pa, r.section_max_pa);
+        println!(
+            "{:>7.1} {:>22.2} {:>20.2} {:>9.2} {:>24.2} {:>22.2} {:>9.2}",
+            r.z_m * 1e3,
+            cs * 1e-3,
+            cb * 1e-3,
+            pct(r.centre_pa),
+            ms * 1e-3,
+            mb * 1e-3,
+            pct(r.section_max_pa)
+        );
+    }
+    let worst = |f: fn(&Row) -> [f64; 2]| {
+        rows.iter().map(|r| (r.z_m, pct(f(r)))).fold((f64::NAN, 0.0f64), |w, x| if x.1.abs() > w.1.abs() { x } else { w })
+    };
+    let ((zc, dc), (zm, dm)) = (worst(|r| r.centre_pa), worst(|r| r.section_max_pa));
+    println!(
+        "largest change from the bend: centre line under the wheel {dc:+.2} % (z = {:.1} mm), section maximum {dm:+.2} % (z = {:.1} mm)",
+        zc * 1e3,
+        zm * 1e3
+    );
     Ok(())
 }

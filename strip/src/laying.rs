@@ -74,9 +74,22 @@ pub struct LayingSolution {
 
 impl LayingModel {
     pub fn build(p: &StripParams) -> Result<LayingModel> {
+        LayingModel::build_bent(p, None)
+    }
+
+    /// [`LayingModel::build`], or with `bend_radius_m` the strip bent about its normal along a
+    /// circle of that radius ([`Mesh::bent`]; the inside of the bend at +x): the stiffness is
+    /// the bent mesh's. Positions along the strip (the wheel's z_a, the bump, the centre line)
+    /// stay arc lengths of the centre line, the wheel's Gaussian map is laid along it, and a
+    /// bottom node's tributary area shrinks to the inside of the bend by (R − x) / R, so the
+    /// centre line's pressures compare one to one with the straight strip's.
+    pub fn build_bent(p: &StripParams, bend_radius_m: Option<f64>) -> Result<LayingModel> {
         let mesh = Mesh::build(p.length_m, p.element_m);
         let mat = Material { youngs_pa: p.youngs_pa, poisson: p.poisson, density_kg_m3: p.density_kg_m3 };
-        let k = assemble(&mesh, &mat).k;
+        let k = match bend_radius_m {
+            Some(r) => assemble(&mesh.bent(r), &mat).k,
+            None => assemble(&mesh, &mat).k,
+        };
         let bottom_nodes = mesh.bottom_nodes();
         let ndof = 3 * mesh.node_count();
         let bottom: Vec<usize> = bottom_nodes.iter().flat_map(|&b| (0..3).map(move |d| 3 * b + d)).collect();
@@ -124,7 +137,12 @@ impl LayingModel {
                 }
             }
         }
-        let bottom_areas_m2 = mesh.bottom_tributary_areas();
+        let mut bottom_areas_m2 = mesh.bottom_tributary_areas();
+        if let Some(r) = bend_radius_m {
+            for (a, &b) in bottom_areas_m2.iter_mut().zip(&bottom_nodes) {
+                *a *= (r - mesh.coords[b][0]) / r;
+            }
+        }
         let top_nodes = mesh.top_nodes();
         let top_xyz_m = top_nodes.iter().map(|&n| mesh.coords[n]).collect();
         Ok(LayingModel { params: p.clone(), mesh, k_ib, k_ii, interior_of, schur, bottom_nodes, bottom_areas_m2, top_nodes, top_xyz_m })

@@ -39,6 +39,10 @@ pub struct Mesh {
     pub section_quads: Vec<[usize; 4]>,
     pub section_xy: Vec<[f64; 2]>,
     pub z_layers: Vec<f64>,
+    /// True when every layer is the section extruded straight along z (so `fem::assemble`
+    /// computes one layer's element matrices and reuses them); false once [`Mesh::bent`] moved
+    /// the nodes, and the assembly reads each hexahedron's own coordinates.
+    pub extruded: bool,
 }
 
 fn lerp(a: [f64; 2], b: [f64; 2], t: f64) -> [f64; 2] {
@@ -222,6 +226,7 @@ impl Mesh {
             section_quads: sb.quads,
             section_xy: sb.xy,
             z_layers,
+            extruded: true,
         }
     }
 
@@ -241,6 +246,22 @@ impl Mesh {
 
     /// Tributary (consistent, integral of the shape function) area of each bottom node (m^2),
     /// in the order of `bottom_nodes`.
+    /// This mesh bent about the strip normal (task y) so that its centre line (x = 0) follows a
+    /// circle of radius `radius_m` with its centre at x = +radius_m, z = 0 (the strip turning
+    /// towards +x, the inside of the bend): a node at (x, y, z) goes to the radius R − x at the
+    /// angle z / R. The nodes' numbering, the sections and `z_layers` (the centre line's arc
+    /// length) stay; only `coords` move. Issue 26 measures what the loop's neglect of a contour's
+    /// curvature costs with it.
+    pub fn bent(&self, radius_m: f64) -> Mesh {
+        let mut m = self.clone();
+        m.extruded = false;
+        for c in &mut m.coords {
+            let (rho, theta) = (radius_m - c[0], c[2] / radius_m);
+            *c = [radius_m - rho * theta.cos(), c[1], rho * theta.sin()];
+        }
+        m
+    }
+
     pub fn bottom_tributary_areas(&self) -> Vec<f64> {
         let xs: Vec<f64> = self.section_bottom.iter().map(|&s| self.section_xy[s][0]).collect();
         let half = |v: &[f64], i: usize| {
@@ -261,6 +282,26 @@ impl Mesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Bending keeps the centre line's arc length: its nodes lie on the circle of radius R
+    /// about (R, ·, 0) at the angle z / R, neighbours a chord 2R sin(Δz / 2R) apart; a node at
+    /// lateral x lies at R − x from the centre; heights do not move.
+    #[test]
+    fn the_bent_mesh_lays_the_centre_line_along_the_circle() {
+        let (m, r) = (Mesh::build(40e-3, 2e-3), 0.05);
+        let b = m.bent(r);
+        for (a, c) in m.coords.iter().zip(&b.coords) {
+            let rho = (c[0] - r).hypot(c[2]);
+            assert!((rho - (r - a[0])).abs() < 1e-15 && c[1] == a[1], "{a:?} -> {c:?}");
+            assert!(((r - c[0]).atan2(c[2]) - (std::f64::consts::FRAC_PI_2 - a[2] / r)).abs() < 1e-12, "{a:?} -> {c:?}");
+        }
+        let centre: Vec<usize> = (0..m.layers).map(|k| k * m.nodes_per_section + m.section_bottom_centre).collect();
+        for w in centre.windows(2) {
+            let (p, q, dz) = (b.coords[w[0]], b.coords[w[1]], m.coords[w[1]][2] - m.coords[w[0]][2]);
+            let chord = (p[0] - q[0]).hypot(p[2] - q[2]);
+            assert!((chord - 2.0 * r * (dz / (2.0 * r)).sin()).abs() < 1e-15);
+        }
+    }
 
     #[test]
     fn one_millimetre_mesh_has_design_dof_count() {

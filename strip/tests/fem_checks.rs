@@ -153,6 +153,7 @@ fn block(w: f64, h: f64, l: f64, n: usize) -> Mesh {
         section_quads: quads,
         section_xy: xy,
         z_layers,
+        extruded: true,
     }
 }
 

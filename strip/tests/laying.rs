@@ -111,3 +111,51 @@ fn bonded_min_force_reaches_the_level_exactly() {
     assert!((peak_at(f) - 100e3).abs() < 1e-6 * 100e3, "peak at the computed force {} Pa", peak_at(f));
     assert!(peak_at(0.99 * f) < 100e3);
 }
+
+/// The smallest corner radius of issue 26's sunroof contour.
+const SUNROOF_CORNER_M: f64 = 0.05;
+
+#[test]
+fn a_strip_bent_along_a_huge_radius_tends_to_the_straight_strip_as_one_over_the_radius() {
+    // The bent model's limit: the bend changes the pressures by terms of order (half width) / R
+    // (the inside's areas and stiffness against the outside's), so at R = 0.5 and 1 km they move
+    // by a few millionths of the peak, and halving 1/R halves the change.
+    let p = params();
+    let straight = LayingModel::build(&p).unwrap();
+    let change = |r: f64, support: BottomSupport| {
+        let (a, b) = (
+            straight.solve(16e-3, -10.0, support).unwrap(),
+            LayingModel::build_bent(&p, Some(r)).unwrap().solve(16e-3, -10.0, support).unwrap(),
+        );
+        let peak = a.pressure_pa.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        a.pressure_pa.iter().zip(&b.pressure_pa).map(|(pa, pb)| (pa - pb).abs()).fold(0.0, f64::max) / peak
+    };
+    for support in [BottomSupport::BondedEverywhere, BottomSupport::BondFront] {
+        let (near, far) = (change(500.0, support), change(1000.0, support));
+        eprintln!("{support:?}: largest change {near:.3e} of the peak at R = 0.5 km, {far:.3e} at 1 km");
+        assert!(far < 1e-5, "{support:?}: {far}");
+        assert!((near / far - 2.0).abs() < 0.2, "{support:?}: {near:e} at 0.5 km, {far:e} at 1 km");
+    }
+}
+
+#[test]
+fn the_bent_strips_reactions_balance_the_wheel_force_and_its_inside_carries_more() {
+    // Global equilibrium holds on the bent strip too (the areas shrink to the inside, the
+    // reactions they carry sum to the wheel force). And the bend is felt: the same wheel on the
+    // strip bent at the sunroof's corner radius changes the bottom pressures.
+    let p = params();
+    let (straight, bent) = (LayingModel::build(&p).unwrap(), LayingModel::build_bent(&p, Some(SUNROOF_CORNER_M)).unwrap());
+    let areas = bent.bottom_areas_m2().to_vec();
+    assert!(
+        areas.iter().zip(straight.bottom_areas_m2()).any(|(b, s)| b < s)
+            && areas.iter().zip(straight.bottom_areas_m2()).any(|(b, s)| b > s)
+    );
+    for support in [BottomSupport::BondedEverywhere, BottomSupport::BondFront] {
+        let sol = bent.solve(20e-3, -10.0, support).unwrap();
+        let total: f64 = sol.pressure_pa.iter().zip(&areas).map(|(p, a)| p * a).sum();
+        let scale = sol.pressure_pa.iter().zip(&areas).map(|(p, a)| (p * a).abs()).sum::<f64>();
+        assert!((total - 10.0).abs() < 1e-9 * scale, "{support:?}: reactions {total} N against the wheel's 10 N");
+        let flat = straight.solve(20e-3, -10.0, support).unwrap();
+        assert!(sol.pressure_pa.iter().zip(&flat.pressure_pa).any(|(b, s)| (b - s).abs() > 1e-4 * s.abs().max(1.0)));
+    }
+}
