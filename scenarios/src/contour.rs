@@ -248,6 +248,93 @@ impl Contour {
     }
 }
 
+/// How close to the wrist singularity (joint 5 at zero: joints 4 and 6 aligned) a contour may
+/// take the arm, rad: within 10° the wrist's speeds for a turn of the heading grow as 1 / sin q5.
+pub const WRIST_SINGULARITY_MARGIN_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
+
+/// The reach check's sample spacing along the contour, m: a heading change of at most 0.1 rad
+/// per sample at the sunroof's 20 mm minimum radius, so each IK starts next to its answer.
+pub const REACH_STEP_M: f64 = 2e-3;
+
+/// Largest joint move between two samples the reach check accepts, rad: more is the IK jumping
+/// to another branch (a wrist flip), not the arm following the contour.
+pub const REACH_MAX_JOINT_STEP_RAD: f64 = 0.3;
+
+/// Where along a contour the arm cannot follow it, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReachError {
+    /// Arc length of the first sample that fails, m.
+    pub s_m: f64,
+    pub why: String,
+}
+
+impl std::fmt::Display for ReachError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "at arc length {:.1} mm: {}", self.s_m * 1e3, self.why)
+    }
+}
+
+impl Contour {
+    /// The TCP pose over the contour at `s_m`: at height `tcp_z_base_m`, the tool pointing down
+    /// and turned about the normal by the heading (the wheel's axis across the tangent; at
+    /// heading 0 the straight strip's tool-down pose).
+    pub fn tcp_pose(&self, s_m: f64, tcp_z_base_m: f64) -> nalgebra::Isometry3<f64> {
+        let p = self.at(s_m);
+        let down = robot::tool_down_pose(p.xy_base_m[0], p.xy_base_m[1], tcp_z_base_m);
+        let turn = nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), p.heading_rad);
+        nalgebra::Isometry3::from_parts(down.translation, turn * down.rotation)
+    }
+
+    /// The arm's joints along the contour from `s_from_m` to `s_to_m` (past the length of a
+    /// closed contour: round again) every [`REACH_STEP_M`], the TCP on [`Contour::tcp_pose`], each
+    /// IK seeded with the sample before (the first with `seed`): the check before a run. Refused
+    /// at the first sample that is out of reach, puts a joint past its range (joint 6 winds up
+    /// through a closed contour), comes within [`WRIST_SINGULARITY_MARGIN_RAD`] of the wrist
+    /// singularity, or jumps to another branch ([`REACH_MAX_JOINT_STEP_RAD`]).
+    pub fn joints_along(
+        &self,
+        robot: &robot::Robot,
+        tcp_z_base_m: f64,
+        s_from_m: f64,
+        s_to_m: f64,
+        seed: &robot::Vec6,
+    ) -> Result<Vec<(f64, robot::Vec6)>, ReachError> {
+        let n = ((s_to_m - s_from_m) / REACH_STEP_M).ceil().max(0.0) as usize;
+        let mut out = Vec::with_capacity(n + 1);
+        let mut prev = *seed;
+        for k in 0..=n {
+            let s = (s_from_m + k as f64 * REACH_STEP_M).min(s_to_m);
+            let q = robot.ik_tcp(&self.tcp_pose(s, tcp_z_base_m), &prev).map_err(|e| ReachError { s_m: s, why: e.to_string() })?;
+            if q[4].abs() < WRIST_SINGULARITY_MARGIN_RAD {
+                return Err(ReachError {
+                    s_m: s,
+                    why: format!(
+                        "joint 5 at {:.1}°, within {:.0}° of the wrist singularity",
+                        q[4].to_degrees(),
+                        WRIST_SINGULARITY_MARGIN_RAD.to_degrees()
+                    ),
+                });
+            }
+            if k > 0 {
+                if let Some(j) = (0..6).find(|&j| (q[j] - prev[j]).abs() > REACH_MAX_JOINT_STEP_RAD) {
+                    return Err(ReachError {
+                        s_m: s,
+                        why: format!(
+                            "joint {} jumps by {:.1}° in {:.0} mm (another IK branch)",
+                            j + 1,
+                            (q[j] - prev[j]).to_degrees(),
+                            REACH_STEP_M * 1e3
+                        ),
+                    });
+                }
+            }
+            out.push((s, q));
+            prev = q;
+        }
+        Ok(out)
+    }
+}
+
 /// Point and heading a distance `a_m` (0 ≤ a ≤ the piece's length) into `piece` from `(p, h)`.
 fn end_of(piece: &Piece, p: [f64; 2], h: f64, a_m: f64) -> ([f64; 2], f64) {
     match *piece {
@@ -416,6 +503,61 @@ mod tests {
         assert!(e.why.contains("tangent jumps by -90.000°"), "{e}");
         assert!(Contour::new([0.9, 0.0], 0.0, &[line(r), arc(r, 1.5 * PI), line(r)], false, MIN_R).is_ok());
         assert!(Contour::new([0.9, 0.0], 0.0, &[arc(r, PI), arc(r, PI)], true, MIN_R).is_ok());
+    }
+
+    /// The arm at the default placement's table height over the sunroof's contour.
+    fn arm() -> (robot::Robot, f64, robot::Vec6) {
+        let s = crate::Scenario::default();
+        let tcp_z = s.placement.table_z_m + crate::geometry::STRIP_TOP_HEIGHT_M + s.robot.wheel_radius_mm * 1e-3;
+        (crate::geometry::plant_robot(&s), tcp_z, robot::Vec6::from(robot::pose::IK_SEED_TOOL_DOWN))
+    }
+
+    /// Round the sunroof (centred at the default strip's spot, started mid long side and closed
+    /// with 5 mm of overlap): every sample's TCP is the contour's point and heading (forward
+    /// kinematics, an independent path), joint 6 winds through one turn (the heading's 360°),
+    /// and the wrist stays clear of its singularity.
+    #[test]
+    fn the_arm_follows_the_sunroof_and_joint_6_winds_one_turn() {
+        let (robot, tcp_z, seed) = arm();
+        let c = Contour::rounded_rectangle([0.9, -0.125], 0.0, 0.4, 0.25, 0.05, MIN_R).unwrap();
+        let path = c.joints_along(&robot, tcp_z, 0.0, c.length_m() + 0.005, &seed).unwrap();
+        for (s, q) in &path {
+            let pose = robot.tcp_pose(q);
+            let want = c.tcp_pose(*s, tcp_z);
+            assert!((pose.translation.vector - want.translation.vector).norm() < 1e-9, "s {s}");
+            assert!(pose.rotation.angle_to(&want.rotation) < 1e-9, "s {s}");
+        }
+        let (q_first, q_last) = (path[0].1, path.last().unwrap().1);
+        let wound = (q_last[5] - q_first[5]).abs().to_degrees();
+        let min_q5 = path.iter().map(|(_, q)| q[4].abs()).fold(f64::INFINITY, f64::min);
+        eprintln!("sunroof: {} samples, joint 6 wound {wound:.1}°, |joint 5| at least {:.1}°", path.len(), min_q5.to_degrees());
+        assert!((wound - 360.0).abs() < 5.0, "joint 6 wound {wound}° over one turn");
+    }
+
+    /// Refusals name the arc length where the arm fails: a line that runs away from the base
+    /// leaves the workspace somewhere between 1.2 and 1.9 m out (the IRB 2400 reaches 1.55 m; here
+    /// joint 3 meets its limit at x = 1.52 m); three turns of a circle wind joint 6 past its 400°
+    /// where the heading's turn reaches the range left from the start.
+    #[test]
+    fn leaving_the_reach_or_winding_joint_6_past_its_range_is_refused_at_the_arc_length() {
+        let (robot, tcp_z, seed) = arm();
+        let away = Contour::new([0.9, 0.0], 0.0, &[Piece::Line { length_m: 1.5 }], false, MIN_R).unwrap();
+        let e = away.joints_along(&robot, tcp_z, 0.0, 1.5, &seed).unwrap_err();
+        eprintln!("running away: {e}");
+        let x = 0.9 + e.s_m;
+        assert!(x > 1.2 && x < 1.9, "{e}");
+        assert!(e.to_string().starts_with(&format!("at arc length {:.1} mm", e.s_m * 1e3)), "{e}");
+        let r = 0.06;
+        let circle = Contour::new([0.9, 0.0], 0.0, &[Piece::Arc { radius_m: r, turn_rad: 1.5 * PI }; 4], false, MIN_R).unwrap();
+        let e = circle.joints_along(&robot, tcp_z, 0.0, circle.length_m(), &seed).unwrap_err();
+        eprintln!("three turns: {e}");
+        assert!(e.why.contains("joint 6"), "{e}");
+        let q6_0 = robot.ik_tcp(&circle.tcp_pose(0.0, tcp_z), &seed).unwrap()[5];
+        // q6 follows the heading one to one (either sense): the limit is reached after
+        // 400° − |q6_0| of turn in the direction joint 6 turns.
+        let turned = e.s_m / r;
+        let left = [400f64.to_radians() - q6_0, 400f64.to_radians() + q6_0];
+        assert!(left.iter().any(|l| (turned - l).abs() < 0.05), "{e}: turned {turned} rad, q6 at start {q6_0}");
     }
 
     /// The time law's limit: v² κ at the limit is the lateral acceleration given; lines have none.
