@@ -35,6 +35,9 @@ pub struct Keep<'p> {
     pub recording: Option<&'p Path>,
     /// Keep the tick rows in memory.
     pub rows: bool,
+    /// Log the run's warnings and errors only, not its Info events (a sweep's or study's cases:
+    /// one "controller connected" line per case otherwise); the recording has them all.
+    pub quiet: bool,
 }
 
 /// One in-process run of the scenario at `scenario_path` for `duration_s` (None: the scenario's,
@@ -81,7 +84,8 @@ pub fn run(
     }
     let started = Instant::now();
     let mut stats = LoopStats::empty();
-    let mut hand_on = plant_sim::tick_events::EventHandOn::new(plant.period_ns());
+    let hand_on = plant_sim::tick_events::EventHandOn::new(plant.period_ns());
+    let mut hand_on = if keep.quiet { hand_on.quiet() } else { hand_on };
     while plant.tick() < n_ticks {
         if signals.stop_requested() {
             stats.stopped_by_signal = true;

@@ -434,7 +434,7 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
     eprintln!("rig {rig}: plant tick + controller step in process (lockstep, no daemons), scenario {}", scenario.display());
     let recording = dir.join("run.mcap");
     let tuning = recordings::RecorderTuning::default();
-    let keep = in_process::Keep { recording: Some(&recording), rows: false };
+    let keep = in_process::Keep { recording: Some(&recording), rows: false, quiet: false };
     let (v, _) = in_process::run(rig, scenario, duration_s, keep, tuning, |s| plant_sim::physics::Physics::new(s, &cache_dir), signals)?;
     print!("{}", summary::run_summary(&v));
     let numbers = match recording_tools::cli::summary_numbers(&recording) {
@@ -512,7 +512,7 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
             let rig = format!("sweep-case-{n:02}");
             let tuning = recordings::RecorderTuning { compression_level: in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
             let all = a.recordings == study::file::Keep::All;
-            let keep = in_process::Keep { recording: all.then_some(recording.as_path()), rows: true };
+            let keep = in_process::Keep { recording: all.then_some(recording.as_path()), rows: true, quiet: true };
             let ran = in_process::run(&rig, path, a.launch.duration, keep, tuning.clone(), |s| strips.physics(s), signals);
             let (ending, summary, rows) = match ran {
                 Ok((v, rows)) if v.stopped_by_signal => (Ending::Interrupted, Some(v), rows),
@@ -526,7 +526,7 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
             let recorded = if all {
                 true
             } else if failing && a.recordings == study::file::Keep::Failing {
-                let again = in_process::Keep { recording: Some(&recording), rows: false };
+                let again = in_process::Keep { recording: Some(&recording), rows: false, quiet: true };
                 in_process::run(&rig, path, a.launch.duration, again, tuning, |s| strips.physics(s), signals).is_ok()
             } else {
                 false

@@ -183,11 +183,19 @@ pub struct EventHandOn {
     ticks_per_s: u64,
     /// Tick of the last rate-limited log line.
     last_log_tick: Option<u64>,
+    /// Log Info-level events too (false: warnings and errors only; every event is recorded).
+    log_info: bool,
 }
 
 impl EventHandOn {
     pub fn new(period_ns: u64) -> EventHandOn {
-        EventHandOn { ticks_per_s: 1_000_000_000 / period_ns.max(1), last_log_tick: None }
+        EventHandOn { ticks_per_s: 1_000_000_000 / period_ns.max(1), last_log_tick: None, log_info: true }
+    }
+
+    /// Log only the warnings and errors (the cases of a sweep or study: each would otherwise log
+    /// its "controller connected"); the recording gets every event all the same.
+    pub fn quiet(self) -> EventHandOn {
+        EventHandOn { log_info: false, ..self }
     }
 
     /// Record and log every event of `events`.
@@ -213,7 +221,8 @@ impl EventHandOn {
             match (r.event.level(), r.event) {
                 (Level::None, _) => {}
                 (_, PlantEvent::MissStreak { total_misses }) => tracing::warn!("{} (total misses {total_misses})", s.as_str()),
-                (Level::Info, _) => tracing::info!("{}", s.as_str()),
+                (Level::Info, _) if self.log_info => tracing::info!("{}", s.as_str()),
+                (Level::Info, _) => {}
                 (Level::Warn, _) => tracing::warn!("{}", s.as_str()),
                 (Level::Error, _) => tracing::error!("{}", s.as_str()),
             }

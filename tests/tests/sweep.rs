@@ -92,6 +92,13 @@ fn a_sweep_over_bump_heights_is_the_runs_it_stands_for_and_the_bump_superposes()
     assert_eq!(s["recording"]["scene_rate_hz"].as_float(), Some(10.0), "{text}");
     let counts = topic_counts(&case.join("run.mcap"));
     assert_eq!((counts["/joint_state"], counts["/strip"], counts["/strip_scene"], counts["/tf"]), (3600, 3600, 36, 36), "{counts:?}");
+
+    // The cases' Info events are recorded, not logged: no "controller connected" line per case
+    // on the terminal, and each recording still has its controller-change event.
+    let log = sweep.stderr();
+    assert!(!log.contains("connected"), "a case logged its Info events:\n{log}");
+    let rec = Recording::open_complete(case.join("run.mcap")).unwrap();
+    assert!(rec.events.iter().any(|e| e.text.ends_with("connected")), "{:?}", rec.events);
 }
 
 /// Messages per topic, read with the mcap crate (not the rig's reader).

@@ -157,7 +157,7 @@ pub fn run_case(
     let tuning = recordings::RecorderTuning { compression_level: crate::in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
     let rig = format!("study-case-{n}");
     // Every case's recording is wanted: written in the one run.
-    let first = Sink { recording: (keep == Keep::All).then_some(recording), rows: true };
+    let first = Sink { recording: (keep == Keep::All).then_some(recording), rows: true, quiet: true };
     let ran = crate::in_process::run(&rig, scenario, None, first, tuning.clone(), |s| strips.physics(s), signals);
     let (ending, summary, rows) = match ran {
         Ok((v, _)) if v.stopped_by_signal => return Ok(None),
@@ -198,7 +198,7 @@ pub fn run_case(
             &rig,
             scenario,
             None,
-            Sink { recording: Some(recording), rows: false },
+            Sink { recording: Some(recording), rows: false, quiet: true },
             tuning,
             |s| strips.physics(s),
             signals,
