@@ -10,8 +10,8 @@
 //! frame at s is the task frame of a straight strip laid along the tangent there: task z the
 //! tangent, task y the substrate normal (base +z), task x the lateral direction to the left.
 //!
-//! Not yet used by a run: the controller's reference, the plant's contact along the contour and
-//! the reach check are the rest of issue 26.
+//! A scenario's `[contour]` builds one ([`Contour::from_scenario`]); `crate::path` lays the strip
+//! along it for the plant and the controller, and [`TimeLaw`] is the roll's speed along it.
 
 use std::f64::consts::TAU;
 
@@ -245,6 +245,118 @@ impl Contour {
         } else {
             (lateral_accel_mps2 / k).sqrt()
         }
+    }
+}
+
+/// The tightest arc a contour may have, m: twice the wheel's 10 mm radius. The loop neglects
+/// the strip's curvature in arcs; at the sunroof's 50 mm the curved FE model moves the centre
+/// line's pressure by 0.06 % and the edges' by 7.9 % (`rig model curvature`), growing as 1/R, so
+/// below 20 mm the straight strip no longer stands for the bent one.
+pub const MIN_RADIUS_M: f64 = 0.02;
+
+impl Contour {
+    /// The scenario's `[contour]`, from `[placement]`'s strip start on (see `ContourConfig`).
+    pub fn from_scenario(s: &crate::Scenario) -> Result<Contour, ContourError> {
+        let c = &s.contour;
+        let pieces: Vec<Piece> = c
+            .pieces
+            .iter()
+            .map(|&[line_mm, radius_mm, turn_deg]| {
+                if line_mm > 0.0 {
+                    Piece::Line { length_m: line_mm * 1e-3 }
+                } else {
+                    Piece::Arc { radius_m: radius_mm * 1e-3, turn_rad: turn_deg.to_radians() }
+                }
+            })
+            .collect();
+        let start = [s.placement.strip_start_x_m, s.placement.strip_y_m];
+        Contour::new(start, c.heading_deg.to_radians(), &pieces, c.closed, MIN_RADIUS_M)
+    }
+}
+
+/// The scenario's reach check along its contour: the roll from `trajectory.z_start_mm` to
+/// `z_end_mm` with the wheel on the undeformed strip, the arm the scenario's, seeded from the IK of
+/// the start pose as the plant seeds it.
+pub fn reach_along(s: &crate::Scenario, contour: &Contour) -> Result<(), ReachError> {
+    let robot = crate::geometry::nominal_robot(s);
+    let tcp_z = s.placement.table_z_m + crate::geometry::STRIP_TOP_HEIGHT_M + s.robot.wheel_radius_mm * 1e-3;
+    let (from, to) = (s.trajectory.z_start_mm * 1e-3, s.trajectory.z_end_mm * 1e-3);
+    let seed = robot
+        .ik_tcp(&contour.tcp_pose(from, tcp_z), &robot::ik_seed_tool_down())
+        .map_err(|e| ReachError { s_m: from, why: format!("the start pose: {e}") })?;
+    contour.joints_along(&robot, tcp_z, from, to, &seed).map(|_| ())
+}
+
+/// The roll's time law along a contour (Drake's path × time law: `s(t)` composed with the
+/// contour's `r(s)`): the speed rises from rest at the tangential acceleration `accel`, cruises
+/// at `speed` on lines, stays at or below `sqrt(a_lat R)` in arcs (the lateral-acceleration rule,
+/// [`Contour::speed_limit_mps`]), and slows to rest at the end, each change at `accel`. Tabulated
+/// every [`TimeLaw::STEP_M`] with a constant acceleration between samples (so s, v and a follow
+/// from each other exactly); built once before the run, read allocation-free per tick.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeLaw {
+    /// Arc length from the roll's start, speed and time at each sample.
+    s_m: Vec<f64>,
+    v_mps: Vec<f64>,
+    t_s: Vec<f64>,
+}
+
+impl TimeLaw {
+    /// Sample spacing, m.
+    pub const STEP_M: f64 = 0.5e-3;
+
+    /// The law over `[s_from_m, s_to_m]` of `contour`.
+    pub fn new(contour: &Contour, s_from_m: f64, s_to_m: f64, speed_mps: f64, accel_mps2: f64, lateral_accel_mps2: f64) -> TimeLaw {
+        let dist = (s_to_m - s_from_m).max(0.0);
+        let n = ((dist / Self::STEP_M).ceil() as usize).max(1);
+        let ds = dist / n as f64;
+        // Each sample's limit: the lowest of the pieces within a step of it (the speed must be
+        // down before an arc begins).
+        let limit = |k: usize| {
+            let s = s_from_m + k as f64 * ds;
+            [s - ds, s, s + ds]
+                .iter()
+                .map(|&x| contour.speed_limit_mps(x.clamp(s_from_m, s_to_m), lateral_accel_mps2))
+                .fold(speed_mps, f64::min)
+        };
+        let mut v: Vec<f64> = (0..=n).map(limit).collect();
+        v[0] = 0.0;
+        v[n] = 0.0;
+        for k in 1..=n {
+            v[k] = v[k].min((v[k - 1] * v[k - 1] + 2.0 * accel_mps2 * ds).sqrt());
+        }
+        for k in (0..n).rev() {
+            v[k] = v[k].min((v[k + 1] * v[k + 1] + 2.0 * accel_mps2 * ds).sqrt());
+        }
+        let s_m: Vec<f64> = (0..=n).map(|k| k as f64 * ds).collect();
+        let mut t_s = vec![0.0; n + 1];
+        for k in 0..n {
+            t_s[k + 1] = t_s[k] + 2.0 * ds / (v[k] + v[k + 1]);
+        }
+        TimeLaw { s_m, v_mps: v, t_s }
+    }
+
+    /// How long the roll takes, s.
+    pub fn duration_s(&self) -> f64 {
+        *self.t_s.last().expect("a law has samples")
+    }
+
+    /// Distance from the roll's start (m), speed (m/s) and tangential acceleration (m/s²) `tau`
+    /// seconds into the roll; at rest at the ends outside `[0, duration]`.
+    pub fn at(&self, tau: f64) -> (f64, f64, f64) {
+        let last = self.t_s.len() - 1;
+        if tau <= 0.0 {
+            return (0.0, 0.0, 0.0);
+        }
+        if tau >= self.t_s[last] {
+            return (self.s_m[last], 0.0, 0.0);
+        }
+        let k = self.t_s.partition_point(|&t| t <= tau) - 1;
+        let ds = self.s_m[k + 1] - self.s_m[k];
+        let (v0, v1) = (self.v_mps[k], self.v_mps[k + 1]);
+        let a = (v1 * v1 - v0 * v0) / (2.0 * ds);
+        let x = tau - self.t_s[k];
+        (self.s_m[k] + v0 * x + 0.5 * a * x * x, v0 + a * x, a)
     }
 }
 

@@ -181,8 +181,12 @@ const STRIP_TOP_MM: f64 = STRIP_TOP_HEIGHT_M * 1e3;
 /// Placement limit, m: beyond the IRB 2400's 1.55 m reach with margin.
 const REACH_M: f64 = 2.0;
 /// Peak speed of the rolling phase's cosine velocity profile (twice the mean), mm/s.
+/// Along a contour the time law's cruise speed is the peak (`contour.speed_mm_s`, checked there).
 fn roll_peak_speed_mm_s(s: &Scenario) -> f64 {
     let t = &s.trajectory;
+    if s.contour.is_given() {
+        return 0.0;
+    }
     2.0 * (t.z_end_mm - t.z_start_mm) / t.roll_s
 }
 /// Peak speed of the lift-off's cosine blend over `lift_mm` (π/2 times the mean), mm/s.
@@ -203,6 +207,66 @@ const BUMP_RANGES: [Range; 3] =
     [range(lo_in(0.0), of(1.0, "strip.length_mm", true)), POSITIVE, range(lo_ex(-STRIP_TOP_MM), hi_ex(STRIP_TOP_MM))];
 const SEAM_RANGES: [Range; 3] =
     [range(lo_in(0.0), of(1.0, "strip.length_mm", true)), range(lo_ex(-STRIP_TOP_MM), hi_ex(STRIP_TOP_MM)), POSITIVE];
+
+const PIECE_RANGES: [Range; 3] = [NON_NEGATIVE, NON_NEGATIVE, range(lo_ex(-360.0), hi_ex(360.0))];
+
+/// How far a closed contour's strip may run past its start, mm: a few millimetres of overlap
+/// closes the seal, a second lap is not a seal.
+pub const CONTOUR_OVERLAP_MAX_MM: f64 = 50.0;
+
+/// The contour's rows: each a line or an arc, the contour built (`contour::Contour::new`'s
+/// refusals name the piece: the row), the strip's run on it and the arm able to follow it
+/// (`contour::Contour::joints_along`, refused at the row holding the arc length).
+fn contour_pieces(s: &Scenario) -> Result<(), RowError> {
+    let c = &s.contour;
+    if !c.is_given() {
+        return Ok(());
+    }
+    for (i, &[line, radius, turn]) in c.pieces.iter().enumerate() {
+        let arc = line == 0.0 && radius > 0.0 && turn != 0.0;
+        let straight = line > 0.0 && radius == 0.0 && turn == 0.0;
+        if !(arc || straight) {
+            let col = if line > 0.0 { 1 } else { 0 };
+            return Err(RowError {
+                row: i,
+                col,
+                value: c.pieces[i][col],
+                why: "must be a line [length_mm, 0, 0] or an arc [0, radius_mm, turn_deg], each of positive length".into(),
+            });
+        }
+    }
+    let contour = crate::contour::Contour::from_scenario(s).map_err(|e| {
+        let row = e.piece.unwrap_or(c.pieces.len() - 1);
+        let col = if e.piece.is_some() && c.pieces[row][0] == 0.0 { 1 } else { 0 };
+        RowError { row, col, value: c.pieces[row][col], why: format!("must make a contour that can be rolled: {e}") }
+    })?;
+    let length_mm = contour.length_m() * 1e3;
+    let last = c.pieces.len() - 1;
+    let most = if c.closed { length_mm + CONTOUR_OVERLAP_MAX_MM } else { length_mm };
+    if s.strip.length_mm > most + 1e-6 {
+        return Err(RowError {
+            row: last,
+            col: 0,
+            value: c.pieces[last][0],
+            why: format!(
+                "must carry the whole strip: strip.length_mm is {} mm, the contour {:.1} mm long{}",
+                fmt_num(s.strip.length_mm),
+                length_mm,
+                if c.closed {
+                    format!(" (a closed one takes at most {} mm of overlap)", fmt_num(CONTOUR_OVERLAP_MAX_MM))
+                } else {
+                    String::new()
+                }
+            ),
+        });
+    }
+    if let Err(e) = crate::contour::reach_along(s, &contour) {
+        let row = contour.at(e.s_m).piece;
+        let col = if c.pieces[row][0] == 0.0 { 1 } else { 0 };
+        return Err(RowError { row, col, value: c.pieces[row][col], why: format!("must stay where the arm can follow it: {e}") });
+    }
+    Ok(())
+}
 
 /// Substrate features need a windowed strip: the single model has its one `[bulge]`.
 fn windowed(s: &Scenario, rows: usize) -> Result<(), RowError> {
@@ -402,7 +466,7 @@ pub static FIELDS: &[Field] = &[
     num("trajectory.z_start_mm", "mm", range(lo_in(0.0), of(1.0, "trajectory.z_end_mm", false)), "Wheel position along the strip where rolling starts."),
     num("trajectory.z_end_mm", "mm", range(of(1.0, "trajectory.z_start_mm", false), of(1.0, "strip.length_mm", true)), "Wheel position along the strip where rolling ends."),
     with_rule(
-        num("trajectory.roll_s", "s", POSITIVE, "Rolling time with the cosine velocity profile."),
+        num("trajectory.roll_s", "s", POSITIVE, "Rolling time with the cosine velocity profile (not used along a `[contour]`: its time law sets the roll's speed)."),
         "long enough for a peak rolling speed 2 (z_end_mm - z_start_mm) / roll_s below 1e3 safety.max_tcp_speed_mps (mm/s)",
         |s| below_tcp_limit("roll", roll_peak_speed_mm_s(s), s),
     ),
@@ -498,7 +562,24 @@ pub static FIELDS: &[Field] = &[
     num("mismatch.tool_mass_error", "", range(lo_ex(-1.0), hi_in(1.0)), "Relative error of the tool mass the controller believes: (1 + this) robot.tool_mass_kg."),
     Field { key: "mismatch.tool_com_error_m", kind: Kind::Floats(3), unit: "m", range: range(lo_in(-0.5), hi_in(0.5)), rule: None, meaning: "Error of the tool's centre of mass the controller believes, flange axes." },
     num("mismatch.tool_inertia_error", "", range(lo_ex(-1.0), hi_in(1.0)), "Relative error of the tool inertia the controller believes."),
-    Field { key: "mismatch.link_inertia_scale", kind: Kind::Floats(6), unit: "", range: range(lo_ex(0.0), hi_in(10.0)), rule: None, meaning: "Per link, the plant's mass and inertia against the controller's model (1 = exact; multiplies robot.plant_inertia_scale)." },
+    Field { key: "mismatch.link_inertia_scale", kind: Kind::Floats(6), unit: "", range: range(lo_ex(0.0), hi_in(10.0)), rule: None, meaning: "Per link, the plant's mass and inertia against the controller's model (1 = exact; multiplies robot.plant_inertia_scale)." },    // [contour]
+    Field {
+        key: "contour.pieces",
+        kind: Kind::Rows { cols: &["line_mm", "radius_mm", "turn_deg"], ranges: &PIECE_RANGES, rows: RowsRule { text: "each be a line [length, 0, 0] or an arc [0, radius, turn], the radius at least 20 mm and the turn under 360°, a closed contour meeting its start with its tangent (contour::MIN_RADIUS_M, CLOSURE_TOLERANCE_M); the strip's run z_start_mm to z_end_mm must lie on it (strip.length_mm at most the contour's length plus 50 mm of overlap when closed, its length when open) and within the arm's reach, joint ranges and 10° of the wrist singularity (contour::Contour::joints_along)", check: contour_pieces } },
+        unit: "mm, mm, °",
+        range: ANY,
+        rule: None,
+        meaning: "A contour on the substrate (issue 26): pieces from the strip's start ([placement]) on, each continuing the tangent before it; the strip lies along it, its arc length the strip's z. Empty: the straight strip along base +x.",
+    },
+    num("contour.heading_deg", "°", range(lo_in(-360.0), hi_in(360.0)), "Heading of the contour at its start, from base +x towards base +y."),
+    flag("contour.closed", "The contour closes on its start (a sunroof's opening)."),
+    with_rule(
+        num("contour.speed_mm_s", "mm/s", POSITIVE, "Rolling speed along a contour's lines (the time law's cruise)."),
+        "below 1e3 safety.max_tcp_speed_mps",
+        |s| below_tcp_limit("contour's roll", s.contour.speed_mm_s, s),
+    ),
+    num("contour.accel_mm_s2", "mm/s²", POSITIVE, "Tangential acceleration of the contour's time law (speeding up from and slowing down to rest, and into and out of arcs)."),
+    num("contour.lateral_accel_mm_s2", "mm/s²", POSITIVE, "The time law's rule in arcs: the rolling speed stays at or below sqrt(lateral_accel radius)."),
 ];
 
 /// The field called `key` (`section.field`).

@@ -17,6 +17,7 @@ pub mod fields;
 pub use cell::{DrivesConfig, MismatchConfig, SensorConfig};
 pub mod contour;
 pub mod geometry;
+pub mod path;
 
 /// Where a value of a scenario comes from, for messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -179,6 +180,9 @@ pub struct Scenario {
     pub drives: DrivesConfig,
     /// What the controller believes against what the plant is (none by default).
     pub mismatch: MismatchConfig,
+    /// A curved path on the substrate that the strip lies along (issue 26); none by default: the
+    /// straight strip along base +x.
+    pub contour: ContourConfig,
 }
 
 /// Reflex limits of the plant (DESIGN section 10): crossing one puts the plant into safe stop at
@@ -439,6 +443,46 @@ pub struct SubstrateConfig {
     /// `[[position_mm, step_mm, smoothing_mm], ...]`: the substrate steps by `step_mm` (negative:
     /// down) along a raised-cosine ramp `smoothing_mm` long centred on `position_mm`.
     pub seams: Vec<[f64; 3]>,
+}
+
+/// Most pieces `contour.pieces` may hold.
+pub const MAX_CONTOUR_PIECES: usize = MAX_SUBSTRATE_FEATURES;
+
+/// A contour on the substrate (issue 26, `scenarios/src/contour.rs`): the strip's start is
+/// `[placement]`'s point, and it runs along these pieces from there, its arc length the strip's
+/// z. The roll follows a time law along the arc length (`contour::TimeLaw`), not
+/// `trajectory.roll_s`'s cosine.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ContourConfig {
+    /// `[[line_mm, radius_mm, turn_deg], ...]`: a line `[length, 0, 0]` or an arc
+    /// `[0, radius, turn]` (positive turn: to the left, seen from above), each continuing the
+    /// tangent of the one before. Empty: no contour (the straight strip).
+    pub pieces: Vec<[f64; 3]>,
+    /// Heading of the contour at its start, from base +x towards base +y, degrees.
+    pub heading_deg: f64,
+    /// The contour closes on its start (a sunroof's opening): its end must meet its start with
+    /// the start's tangent.
+    pub closed: bool,
+    /// Rolling speed on the straight pieces, mm/s.
+    pub speed_mm_s: f64,
+    /// Tangential acceleration of the time law (speeding up, slowing down), mm/s².
+    pub accel_mm_s2: f64,
+    /// The time law's rule in arcs: the rolling speed stays at or below sqrt(a_lat R), mm/s².
+    pub lateral_accel_mm_s2: f64,
+}
+
+impl Default for ContourConfig {
+    fn default() -> Self {
+        Self { pieces: Vec::new(), heading_deg: 0.0, closed: false, speed_mm_s: 80.0, accel_mm_s2: 100.0, lateral_accel_mm_s2: 50.0 }
+    }
+}
+
+impl ContourConfig {
+    /// True when the scenario gives a contour.
+    pub fn is_given(&self) -> bool {
+        !self.pieces.is_empty()
+    }
 }
 
 /// Where the strip lies in the robot base frame (DESIGN section 3).
