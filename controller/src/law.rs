@@ -22,6 +22,7 @@ use robot::{Frames, Mat6, Robot, Vec6};
 use crate::gains::Gains;
 use crate::reference::TaskReference;
 use scenarios::geometry::TaskFrame;
+use scenarios::path::StripPath;
 
 /// Logarithm map of SO(3): the rotation vector θ·a of `r` (|θ| ≤ π), robust near 0 and π.
 pub fn so3_log(r: &Matrix3<f64>) -> Vector3<f64> {
@@ -100,6 +101,11 @@ pub struct ControlLaw {
     task: TaskFrame,
     gains: Gains,
     rot_ref_base: Matrix3<f64>,
+    /// Along a contour: the strip's path, whose moving frame at the reference's arc length the law
+    /// works in (None: the fixed task frame), and the last measured arc length (the lap a closed
+    /// contour's projection is counted on).
+    contour: Option<StripPath>,
+    s_hint_m: f64,
     integral_ns: f64,
     /// False while the plant holds or stops the arm or the wheel is off the strip: the force
     /// integral stands still (anti-windup: an error the torque cannot act on is not integrated).
@@ -128,6 +134,8 @@ impl ControlLaw {
             task,
             gains,
             rot_ref_base,
+            contour: None,
+            s_hint_m: 0.0,
             integral_ns: 0.0,
             integrating: true,
             last_force_mode: false,
@@ -136,6 +144,17 @@ impl ControlLaw {
             engage_ticks: 0,
             last_accel_base: Vec6::zeros(),
         }
+    }
+
+    /// Work along the scenario's contour, if it has one: TCP positions and velocities in path
+    /// coordinates ([`scenarios::path`]), the reference's arc length placing the moving frame,
+    /// the tool turned with the heading and its rate fed forward. Without a contour: unchanged.
+    pub fn along_scenario_path(mut self, s: &scenarios::Scenario) -> ControlLaw {
+        if s.contour.is_given() {
+            self.contour = Some(StripPath::from_scenario(s));
+            self.s_hint_m = s.trajectory.z_start_mm * 1e-3;
+        }
+        self
     }
 
     /// The TCP acceleration (linear then angular, base axes) the last step commanded.
@@ -172,15 +191,14 @@ impl ControlLaw {
         let jacobian = self.robot.jacobian_point(&frames, &pos_base_m);
         let twist_base = jacobian * qd;
         let v_base = Vector3::new(twist_base[0], twist_base[1], twist_base[2]);
-        TcpKinematics {
-            frames,
-            pos_base_m,
-            rot_base_tool: frames.rot[6],
-            jacobian,
-            twist_base,
-            pos_task_m: self.task.point_to_task(&pos_base_m),
-            vel_task_mps: self.task.vector_to_task(&v_base),
-        }
+        let (pos_task_m, vel_task_mps) = match &self.contour {
+            None => (self.task.point_to_task(&pos_base_m), self.task.vector_to_task(&v_base)),
+            Some(path) => {
+                let p = path.to_path(&pos_base_m, self.s_hint_m);
+                (p, path.frame_at(p.z).vector_to_task(&v_base))
+            }
+        };
+        TcpKinematics { frames, pos_base_m, rot_base_tool: frames.rot[6], jacobian, twist_base, pos_task_m, vel_task_mps }
     }
 
     /// Force on the strip along task y (N, negative = pressing) from the measured force on the
@@ -201,13 +219,21 @@ impl ControlLaw {
         r: &TaskReference,
         dt: f64,
     ) -> LawOutput {
+        let moving = self.contour.as_ref().map(|path| MovingFrame::new(path, r, kin, &self.rot_ref_base));
+        if self.contour.is_some() {
+            self.s_hint_m = kin.pos_task_m.z;
+        }
+        let (task, r, pos_task_m, vel_task_mps, rot_ref_base) = match &moving {
+            None => (self.task, r, kin.pos_task_m, kin.vel_task_mps, self.rot_ref_base),
+            Some(m) => (m.frame, &m.reference, m.pos_m, m.vel_mps, m.rot_ref_base),
+        };
         let g = &self.gains;
         let f_tool = Vector3::new(wrench_on_tool_base[0], wrench_on_tool_base[1], wrench_on_tool_base[2]);
         let force_meas_n = self.strip_force_y(&f_tool);
 
         // Translation in the task frame (7.8), task y replaced by (6.3) in contact.
-        let pos_err = r.pos_m - kin.pos_task_m;
-        let mut a_task = r.acc_mps2 + pos_err * g.kp_pos + (r.vel_mps - kin.vel_task_mps) * g.kd_pos;
+        let pos_err = r.pos_m - pos_task_m;
+        let mut a_task = r.acc_mps2 + pos_err * g.kp_pos + (r.vel_mps - vel_task_mps) * g.kd_pos;
         // (6.3) damps the velocity relative to the one a changing set-point needs on a
         // spring of the design stiffness: F_e = k_s y, so ẏ_r = Ḟ_r / k_s
         let mut vel_ff = if g.force_rate_feedforward { r.force_rate_y_nps / g.force.strip_stiffness_n_per_m } else { 0.0 };
@@ -216,7 +242,7 @@ impl ControlLaw {
             // an integral kept from before would be a step of k_i ∫ in the commanded force, and
             // the velocity of the moment is faded out of the damping (ENGAGE_FADE_S).
             self.integral_ns = 0.0;
-            self.engage_v0_mps = kin.vel_task_mps.y - vel_ff;
+            self.engage_v0_mps = vel_task_mps.y - vel_ff;
             self.engage_tick = 0;
             self.engage_ticks = (ENGAGE_FADE_S / dt).round() as u32;
         }
@@ -228,18 +254,22 @@ impl ControlLaw {
                 self.engage_tick += 1;
             }
             let dt_integral = if self.integrating { dt } else { 0.0 };
-            a_task.y = impedance_accel(g, &mut self.integral_ns, r.force_y_n, force_meas_n, kin.vel_task_mps.y - vel_ff, dt_integral);
+            a_task.y = impedance_accel(g, &mut self.integral_ns, r.force_y_n, force_meas_n, vel_task_mps.y - vel_ff, dt_integral);
         } else if self.integrating {
             // Position control by plan (approach, lift): the force loop starts afresh. While
             // integration is frozen (re-finding the strip after a safe stop) the state is kept.
             self.integral_ns = 0.0;
         }
-        let a_lin_base = self.task.vector_to_base(&a_task);
+        let a_lin_base = task.vector_to_base(&a_task);
 
-        // Orientation on SO(3): e = log(R_ref Rᵀ) in base axes, ω_ref = 0.
-        let rot_err_base = so3_log(&(self.rot_ref_base * kin.rot_base_tool.transpose()));
+        // Orientation on SO(3): e = log(R_ref Rᵀ) in base axes; ω_ref = 0 on a straight strip,
+        // along a contour the heading's rate κ ṡ about the normal with α_ref = κ s̈ fed forward.
+        let rot_err_base = so3_log(&(rot_ref_base * kin.rot_base_tool.transpose()));
         let omega = Vector3::new(kin.twist_base[3], kin.twist_base[4], kin.twist_base[5]);
-        let a_ang_base = rot_err_base * g.kp_rot - omega * g.kd_rot;
+        let a_ang_base = match &moving {
+            None => rot_err_base * g.kp_rot - omega * g.kd_rot,
+            Some(m) => m.alpha_ref_base + rot_err_base * g.kp_rot + (m.omega_ref_base - omega) * g.kd_rot,
+        };
 
         // (7.6): a_q = J⁻¹ (a_x − J̇ q̇).
         let jdqd = self.robot.jdot_qdot_point(&kin.frames, &kin.pos_base_m, qd);
@@ -257,9 +287,48 @@ impl ControlLaw {
             tau,
             force_meas_n,
             pos_err_task_m: pos_err,
-            rot_err_task_rad: self.task.vector_to_task(&rot_err_base),
+            rot_err_task_rad: task.vector_to_task(&rot_err_base),
             force_integral_ns: self.integral_ns,
             jacobian_ok,
+        }
+    }
+}
+
+/// One tick's moving frame along a contour: the path's frame at the reference's arc length s,
+/// the reference in it (the lateral and height references kept, the tangent's at the origin,
+/// ṡ and s̈ along it and the centripetal κ ṡ² across it), the measured TCP in it, and the tool
+/// orientation turned by the heading with its rate and acceleration about the normal.
+struct MovingFrame {
+    frame: TaskFrame,
+    reference: TaskReference,
+    pos_m: Vector3<f64>,
+    vel_mps: Vector3<f64>,
+    rot_ref_base: Matrix3<f64>,
+    omega_ref_base: Vector3<f64>,
+    alpha_ref_base: Vector3<f64>,
+}
+
+impl MovingFrame {
+    fn new(path: &StripPath, r: &TaskReference, kin: &TcpKinematics, rot_ref_base: &Matrix3<f64>) -> MovingFrame {
+        let s = r.pos_m.z;
+        let frame = path.frame_at(s);
+        let (heading, kappa) = path.heading_at(s);
+        let (sd, sdd) = (r.vel_mps.z, r.acc_mps2.z);
+        let reference = TaskReference {
+            pos_m: Vector3::new(r.pos_m.x, r.pos_m.y, 0.0),
+            acc_mps2: Vector3::new(r.acc_mps2.x + kappa * sd * sd, r.acc_mps2.y, sdd),
+            ..*r
+        };
+        let v_base = Vector3::new(kin.twist_base[0], kin.twist_base[1], kin.twist_base[2]);
+        let turn = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), heading).into_inner();
+        MovingFrame {
+            frame,
+            reference,
+            pos_m: frame.point_to_task(&kin.pos_base_m),
+            vel_mps: frame.vector_to_task(&v_base),
+            rot_ref_base: turn * rot_ref_base,
+            omega_ref_base: Vector3::new(0.0, 0.0, kappa * sd),
+            alpha_ref_base: Vector3::new(0.0, 0.0, kappa * sdd),
         }
     }
 }
@@ -283,6 +352,54 @@ mod tests {
         let gains = Gains::from_scenario(&s, 10.0);
         let q0 = robot.ik_tcp(&geometry::start_tcp_pose(&s), &robot::ik_seed_tool_down()).unwrap();
         (s, ControlLaw::new(robot, task, gains, tool_down_rotation()), q0)
+    }
+
+    /// Along a contour, with the arm exactly on its reference (TCP on the sunroof's first corner,
+    /// tool turned by the heading, moving at ṡ with the heading's rate κ ṡ), the PD has nothing to
+    /// correct: the commanded TCP acceleration is circular motion's closed form, s̈ along the
+    /// tangent plus ṡ² / R towards the centre, and the angular one κ s̈ about the normal.
+    #[test]
+    fn on_a_contour_the_law_feeds_forward_circular_motion() {
+        let s = Scenario::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/sunroof.toml")).unwrap();
+        let robot = controller_robot(&s);
+        let mut law =
+            ControlLaw::new(robot.clone(), TaskFrame::from_scenario(&s), Gains::from_scenario(&s, f64::NAN), tool_down_rotation())
+                .along_scenario_path(&s);
+        let path = scenarios::path::StripPath::from_scenario(&s);
+        let c = path.contour().unwrap().clone();
+        let (s_m, sd, sdd, h) = (0.19, 0.05, -0.02, 0.718);
+        let p = c.at(s_m);
+        assert!(p.curvature_per_m > 0.0, "on the first corner");
+        let q = robot.ik_tcp(&c.tcp_pose(s_m, h), &robot::ik_seed_tool_down()).unwrap();
+        let [tx, ty] = p.tangent();
+        let twist = Vec6::new(sd * tx, sd * ty, 0.0, 0.0, 0.0, p.curvature_per_m * sd);
+        let qd = robot.jacobian_tcp(&q).lu().solve(&twist).unwrap();
+        let kin = law.kinematics(&q, &qd);
+        assert!((kin.pos_task_m - Vector3::new(0.0, h - s.placement.table_z_m, s_m)).norm() < 1e-9, "path coordinates {}", kin.pos_task_m);
+        let r = TaskReference {
+            phase: crate::reference::Phase::Roll,
+            pos_m: kin.pos_task_m,
+            vel_mps: Vector3::new(0.0, 0.0, sd),
+            acc_mps2: Vector3::new(0.0, 0.0, sdd),
+            force_y_n: 0.0,
+            force_rate_y_nps: 0.0,
+            force_mode: false,
+        };
+        let out = law.compute(&q, &qd, &kin, &Vec6::zeros(), &r, 1e-3);
+        let a = law.last_accel_base();
+        let [lx, ly] = p.left();
+        let centripetal = sd * sd / 0.05;
+        let want = Vec6::new(sdd * tx + centripetal * lx, sdd * ty + centripetal * ly, 0.0, 0.0, 0.0, sdd / 0.05);
+        // What the PD adds for the IK's residual pose error, and no more.
+        assert!(
+            out.pos_err_task_m.norm() < 1e-9 && out.rot_err_task_rad.norm() < 1e-9,
+            "{:?} {:?}",
+            out.pos_err_task_m,
+            out.rot_err_task_rad
+        );
+        let g = law.gains();
+        let pd = g.kp_pos * out.pos_err_task_m.norm() + g.kp_rot * out.rot_err_task_rad.norm();
+        assert!((a - want).norm() <= pd + 1e-9, "{a} vs {want} (PD on the residual {pd})");
     }
 
     #[test]

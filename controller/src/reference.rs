@@ -7,10 +7,17 @@
 //! z_start → z_end with a cosine velocity profile → force ramp-down to 0 → lift-off (position
 //! control along y back above the strip) → done (hold).
 //!
+//! Along a `[contour]` the reference is in path coordinates (`scenarios::path`: x lateral, y
+//! height, z the arc length) and the roll follows the contour's [`TimeLaw`] instead of the cosine;
+//! the law turns it into the moving frame.
+//!
 //! Positions are of the TCP (the wheel centre, one wheel radius above the contact point). All time profiles are C¹ (position and velocity
 //! continuous) so the PD feed-forward never sees steps.
 
+use std::sync::Arc;
+
 use nalgebra::Vector3;
+use scenarios::contour::TimeLaw;
 use scenarios::{Scenario, MAX_FORCE_POINTS};
 
 use scenarios::geometry::{self, STRIP_TOP_HEIGHT_M};
@@ -279,6 +286,8 @@ enum Contact {
 #[derive(Clone, Debug)]
 pub struct ReferenceGenerator {
     p: ReferenceParams,
+    /// The roll's time law along a contour (None: the cosine velocity profile over `roll_s`).
+    time_law: Option<Arc<TimeLaw>>,
     phase: Phase,
     /// Time the current phase began, s.
     t0: f64,
@@ -318,6 +327,7 @@ impl ReferenceGenerator {
     pub fn new(p: ReferenceParams) -> Self {
         ReferenceGenerator {
             p,
+            time_law: None,
             phase: Phase::Settle,
             t0: 0.0,
             force_at_contact_n: 0.0,
@@ -335,6 +345,17 @@ impl ReferenceGenerator {
             held_s: 0.0,
             last_t: None,
         }
+    }
+
+    /// The scenario's references: [`ReferenceParams::from_scenario`], and along a contour its
+    /// time law for the roll (whose duration becomes `roll_s`).
+    pub fn from_scenario(s: &Scenario) -> Self {
+        let mut p = ReferenceParams::from_scenario(s);
+        let Some(law) = TimeLaw::of_scenario(s) else {
+            return ReferenceGenerator::new(p);
+        };
+        p.roll_s = law.duration_s();
+        ReferenceGenerator { time_law: Some(Arc::new(law)), ..ReferenceGenerator::new(p) }
     }
 
     /// Let the plan stand still for `dt` s: the plant held or stopped the arm this tick, so the
@@ -390,7 +411,7 @@ impl ReferenceGenerator {
     /// Restart the state machine at time `t` (a controller taking over a running plant starts
     /// from the approach's start pose).
     pub fn reset(&mut self, t: f64) {
-        *self = ReferenceGenerator::new(self.p);
+        *self = ReferenceGenerator { time_law: self.time_law.take(), ..ReferenceGenerator::new(self.p) };
         self.t0 = t;
     }
 
@@ -575,7 +596,10 @@ impl ReferenceGenerator {
                 r.pos_m.y = self.y_at_contact_m;
             }
             Phase::Roll => {
-                let (z, v, a) = cosine_velocity_profile(tau, p.roll_s, z_end_offset);
+                let (z, v, a) = match &self.time_law {
+                    Some(law) => law.at(tau),
+                    None => cosine_velocity_profile(tau, p.roll_s, z_end_offset),
+                };
                 r.pos_m.z = s.z + z;
                 r.vel_mps.z = v;
                 r.acc_mps2.z = a;

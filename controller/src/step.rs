@@ -13,7 +13,7 @@ use scenarios::Scenario;
 
 use crate::gains::Gains;
 use crate::law::ControlLaw;
-use crate::reference::{ReferenceGenerator, ReferenceParams};
+use crate::reference::ReferenceGenerator;
 use crate::sensing::ForceSensing;
 
 /// Measured wrench on the tool in base axes at the TCP, (force, torque) as one 6-vector
@@ -44,14 +44,16 @@ pub struct Controller {
 
 impl Controller {
     /// The scenario's controller: its robot model (without the plant's inertia scale), task
-    /// frame, gains from the design rule, tool pointing down, references from `[trajectory]`.
+    /// frame (along a `[contour]`, the path's moving frame), gains from the design rule, tool
+    /// pointing down (turned with the contour's heading), references from `[trajectory]`.
     pub fn from_scenario(s: &Scenario) -> Controller {
         let law =
-            ControlLaw::new(controller_robot(s), TaskFrame::from_scenario(s), Gains::from_scenario(s, f64::NAN), tool_down_rotation());
+            ControlLaw::new(controller_robot(s), TaskFrame::from_scenario(s), Gains::from_scenario(s, f64::NAN), tool_down_rotation())
+                .along_scenario_path(s);
         Controller {
             law,
             sensing: ForceSensing::from_scenario(s),
-            reference: ReferenceGenerator::new(ReferenceParams::from_scenario(s)),
+            reference: ReferenceGenerator::from_scenario(s),
             contract_version: messages::CONTRACT_VERSION,
             controller_id: 0,
             first: true,

@@ -22,6 +22,8 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
     let period = s.loop_.period_s;
     let n_sub = s.loop_.substeps as usize;
     let h = period / n_sub as f64;
+    // The 1-DOF servo rolls the straight strip of the thesis (its task frame).
+    let task = scenarios::geometry::TaskFrame::from_scenario(s);
     let mut contact = StripContact::new(model, geo, h);
     let mut reference = ReferenceGenerator::new(ReferenceParams::from_scenario(s));
     let rot: Matrix3<f64> = scenarios::geometry::tool_down_rotation();
@@ -62,11 +64,11 @@ pub fn run_1dof(s: &Scenario, model: &StripModel, gains: &Gains, wheel_mass_kg: 
             let tau = i as f64 * h;
             let zz = z0 + vz0 * tau + 0.5 * r.acc_mps2.z * tau * tau;
             let vz = vz0 + r.acc_mps2.z * tau;
-            let pos = geo.task.point_to_base(&Vector3::new(0.0, y, zz));
-            let v = geo.task.vector_to_base(&Vector3::new(0.0, vy, vz));
+            let pos = task.point_to_base(&Vector3::new(0.0, y, zz));
+            let v = task.vector_to_base(&Vector3::new(0.0, vy, vz));
             let w = contact.substep(&pos, &rot, &Vec6::new(v.x, v.y, v.z, 0.0, 0.0, 0.0));
             // m_w ÿ = u + p (the strip pushes the wheel up with p = −F_e).
-            let acc = (u + geo.task.vector_to_task(&w.force_base_n).y) / wheel_mass_kg;
+            let acc = (u + task.vector_to_task(&w.force_base_n).y) / wheel_mass_kg;
             y += vy * h + 0.5 * acc * h * h;
             vy += acc * h;
         }

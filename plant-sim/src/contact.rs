@@ -38,7 +38,8 @@ use robot::Vec6;
 use scenarios::{Boundary, Scenario};
 use strip::{CbBoundary, StripModel, StripParams, Substrate};
 
-use scenarios::geometry::{TaskFrame, STRIP_TOP_HEIGHT_M};
+use scenarios::geometry::STRIP_TOP_HEIGHT_M;
+use scenarios::path::StripPath;
 
 pub mod chain;
 
@@ -72,10 +73,10 @@ pub fn strip_params(s: &Scenario) -> StripParams {
 }
 
 /// Where the strip lies and how the wheel touches it (SI, DESIGN section 3).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ContactGeometry {
-    /// The strip's task frame in the base (`scenarios::geometry`).
-    pub task: TaskFrame,
+    /// Where the strip lies in the base (`scenarios::path`): its task frame, or along a contour.
+    pub path: StripPath,
     pub wheel_radius_m: f64,
     /// Penalty stiffness (N/m) and damping (N s/m).
     pub stiffness_n_per_m: f64,
@@ -85,7 +86,7 @@ pub struct ContactGeometry {
 impl ContactGeometry {
     pub fn from_scenario(s: &Scenario) -> Self {
         ContactGeometry {
-            task: TaskFrame::from_scenario(s),
+            path: StripPath::from_scenario(s),
             wheel_radius_m: s.robot.wheel_radius_mm * 1e-3,
             stiffness_n_per_m: s.contact.stiffness_n_per_m,
             damping_ns_per_m: s.contact.damping_ns_per_m,
@@ -769,10 +770,10 @@ impl StripContact {
         let v = Vector3::new(twist_base[0], twist_base[1], twist_base[2]);
         let w = Vector3::new(twist_base[3], twist_base[4], twist_base[5]);
         let v_low = v + w.cross(&(d * self.geo.wheel_radius_m));
-        // Task coordinates: z along the strip, y up (the strip normal).
-        let p_low_task = self.geo.task.point_to_task(&p_low);
+        // Path coordinates: z along the strip (a contour's arc length), y up (the strip normal).
+        let p_low_task = self.geo.path.to_path(&p_low, self.z_a_m);
         self.z_a_m = p_low_task.z;
-        let y_wheel_end = p_low_task.y + self.geo.task.vector_to_task(&v_low).y * h;
+        let y_wheel_end = p_low_task.y + self.geo.path.normal_velocity(&v_low) * h;
 
         let t = &self.tables.table;
         let (g, s) = t.locate(self.z_a_m);
@@ -947,14 +948,14 @@ pub(crate) mod tests {
 
     /// TCP (wheel centre) position and tool-down orientation for the wheel's lowest point at task (z, y).
     fn tcp_at(g: &ContactGeometry, z: f64, y_low: f64) -> (Vector3<f64>, Matrix3<f64>) {
-        let p = g.task.point_to_base(&Vector3::new(0.0, y_low + g.wheel_radius_m, z));
+        let p = g.path.point_to_base(&Vector3::new(0.0, y_low + g.wheel_radius_m, z));
         let pose = robot::tool_down_pose(p.x, p.y, p.z);
         (pose.translation.vector, pose.rotation.to_rotation_matrix().into_inner())
     }
 
     fn run_hold(model: &StripModel, h: f64, z: f64, y_low: f64, t_end: f64) -> StripContact {
         let g = geo();
-        let mut c = StripContact::new(model, g, h);
+        let mut c = StripContact::new(model, g.clone(), h);
         let (pos, rot) = tcp_at(&g, z, y_low);
         for _ in 0..(t_end / h).round() as usize {
             c.substep(&pos, &rot, &Vec6::zeros());
@@ -1263,7 +1264,7 @@ pub(crate) mod tests {
             }
         };
         let history = |h: f64| -> Vec<f64> {
-            let mut c = StripContact::new(&model, g, h);
+            let mut c = StripContact::new(&model, g.clone(), h);
             let n = (0.2 / h).round() as usize;
             let every = (1e-3 / h).round() as usize;
             let mut out = Vec::new();

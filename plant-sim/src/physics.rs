@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use robot::{Robot, Vec6};
-use scenarios::geometry::{self, TaskFrame};
+use scenarios::geometry;
 use scenarios::{Boundary, Integrator, Scenario};
 
 use crate::contact::StripTables;
@@ -157,7 +157,7 @@ pub struct Physics {
     /// Simulated time of the current state, s.
     time_s: f64,
     /// Where the strip lies, for the recorded wheel position without the strip.
-    task: TaskFrame,
+    path: scenarios::path::StripPath,
     /// Strip + wheel contact (`contact.rs`); None when `strip.enabled = false` or windowed.
     contact: Option<crate::contact::StripContact>,
     /// The windowed long strip's contact (`contact::chain`); None unless `strip.window_mm > 0`.
@@ -238,7 +238,7 @@ impl Physics {
             dt_sub_s: s.loop_.period_s / s.loop_.substeps as f64,
             integrator: s.loop_.integrator,
             time_s: 0.0,
-            task: TaskFrame::from_scenario(s),
+            path: scenarios::path::StripPath::from_scenario(s),
             contact,
             chain,
         })
@@ -473,7 +473,8 @@ impl Physics {
             return;
         }
         let tcp = self.robot.tcp_pose(&self.q);
-        r.wheel_z_m = self.task.point_to_task(&tcp.translation.vector).z;
+        // (without a strip, a closed contour's first lap: no wheel on it to follow)
+        r.wheel_z_m = self.path.to_path(&tcp.translation.vector, 0.0).z;
         r.contact_force_n = 0.0;
         r.bottom_force_n = 0.0;
         r.max_bottom_pressure_pa = 0.0;

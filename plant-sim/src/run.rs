@@ -39,11 +39,12 @@ pub struct RunOptions {
 
 /// Run length when neither the command line nor the scenario sets one: the nominal trajectory
 /// (settle, approach from `approach_height_mm` at `approach_speed_mm_s`, force ramp, dwell, roll,
-/// ramp-down, lift) plus 0.2 s.
+/// ramp-down, lift) plus 0.2 s; the roll along a contour takes its time law's time.
 pub fn nominal_duration_s(s: &Scenario) -> f64 {
     let t = &s.trajectory;
     let approach = if t.approach_speed_mm_s > 0.0 { t.approach_height_mm / t.approach_speed_mm_s } else { 0.0 };
-    t.settle_s + approach + t.force_ramp_s + t.dwell_s + t.roll_s + t.ramp_down_s + t.lift_s + 0.2
+    let roll_s = scenarios::contour::TimeLaw::roll_s(s);
+    t.settle_s + approach + t.force_ramp_s + t.dwell_s + roll_s + t.ramp_down_s + t.lift_s + 0.2
 }
 
 /// How long a run lasts: its simulated seconds and the whole control ticks they round to.

@@ -10,6 +10,7 @@
 //! - [`strip_rows`] are the `/strip` rows the rolling numbers read: a recording's, or a case's
 //!   kept in memory (a sweep or study case that writes no file).
 //! - [`bond_map`] is a long seal's bond map: the peak pressure at each millimetre of the strip.
+//! - [`contour_figures`] are a contour run's figures per segment (force, lateral, heading, bond).
 //! - [`compare`] puts several recordings side by side.
 //! - [`replay`] drives a controller open-loop from a recording and compares its torques.
 //! - [`attribution`] says whose fault each missed tick of a real-time run is.
@@ -20,6 +21,7 @@ pub mod attribution;
 pub mod bond_map;
 pub mod cli;
 pub mod compare;
+pub mod contour_figures;
 pub mod plots;
 pub mod read;
 pub mod replay;

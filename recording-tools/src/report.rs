@@ -124,6 +124,8 @@ pub struct ReportNumbers {
     /// A windowed long strip's bond map (issue 25): the peak centre-line pressure per mm along
     /// the strip, its coverage, per feature and per bin along the strip ([`crate::bond_map`]).
     pub bond_map: Option<crate::bond_map::BondMap>,
+    /// A contour run's figures per segment (issue 26, [`crate::contour_figures`]).
+    pub contour: Option<Vec<crate::contour_figures::Segment>>,
 }
 
 /// Index i (into the tick rows) of every tick where the wheel rolls ([`crate::tracking`]'s rule).
@@ -157,6 +159,7 @@ pub fn interpolate(z_nodes: &[f64], p: &[f32], z: f64) -> Option<f64> {
 }
 
 pub fn numbers(rec: &Recording) -> ReportNumbers {
+    let bond_map = crate::bond_map::bond_map(rec);
     let ticks = rec.joint_state.len();
     let period_s = rec.period_s();
     let misses = rec.timing.iter().filter(|t| t.timing.missed).count() as u64;
@@ -210,7 +213,8 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         own_miss_rate: attribution.as_ref().filter(|a| a.stamped && a.periods > 0).map(|a| a.own_miss_rate()),
         missed_ticks: attribution.as_ref().map_or_else(Vec::new, |a| a.missed_ticks.iter().map(|&(t, c)| (t, c.name())).collect()),
         attribution,
-        bond_map: crate::bond_map::bond_map(rec),
+        contour: crate::contour_figures::contour_figures(rec, bond_map.as_ref()),
+        bond_map,
     }
 }
 
@@ -348,6 +352,9 @@ pub fn format_text(n: &ReportNumbers) -> String {
     }
     if let Some(b) = &n.bond_map {
         crate::bond_map::format_text(b, &mut s);
+    }
+    if let Some(c) = &n.contour {
+        crate::contour_figures::format_text(c, &mut s);
     }
     if let Some(a) = &n.attribution {
         s += &crate::attribution::format_table(a);

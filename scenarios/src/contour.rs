@@ -336,6 +336,27 @@ impl TimeLaw {
         TimeLaw { s_m, v_mps: v, t_s }
     }
 
+    /// The scenario's roll along its `[contour]` (None without one): `trajectory.z_start_mm` to
+    /// `z_end_mm` at `contour.speed_mm_s`, `accel_mm_s2` and `lateral_accel_mm_s2`.
+    pub fn of_scenario(s: &crate::Scenario) -> Option<TimeLaw> {
+        let c = &s.contour;
+        let contour = crate::path::StripPath::from_scenario(s).contour()?.clone();
+        let t = &s.trajectory;
+        Some(TimeLaw::new(
+            &contour,
+            t.z_start_mm * 1e-3,
+            t.z_end_mm * 1e-3,
+            c.speed_mm_s * 1e-3,
+            c.accel_mm_s2 * 1e-3,
+            c.lateral_accel_mm_s2 * 1e-3,
+        ))
+    }
+
+    /// How long the scenario's roll takes, s: its contour's time law, or `trajectory.roll_s`.
+    pub fn roll_s(s: &crate::Scenario) -> f64 {
+        TimeLaw::of_scenario(s).map_or(s.trajectory.roll_s, |l| l.duration_s())
+    }
+
     /// How long the roll takes, s.
     pub fn duration_s(&self) -> f64 {
         *self.t_s.last().expect("a law has samples")

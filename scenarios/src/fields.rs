@@ -222,6 +222,14 @@ fn contour_pieces(s: &Scenario) -> Result<(), RowError> {
     if !c.is_given() {
         return Ok(());
     }
+    if s.egm.enabled {
+        return Err(RowError {
+            row: 0,
+            col: 0,
+            value: f64::NAN,
+            why: "must be empty with egm.enabled: the EGM force controller rolls a straight strip".into(),
+        });
+    }
     for (i, &[line, radius, turn]) in c.pieces.iter().enumerate() {
         let arc = line == 0.0 && radius > 0.0 && turn != 0.0;
         let straight = line > 0.0 && radius == 0.0 && turn == 0.0;

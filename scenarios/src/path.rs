@@ -87,6 +87,15 @@ impl StripPath {
         }
     }
 
+    /// The strip-normal (task y, up) component of the base vector `v_base`.
+    #[inline]
+    pub fn normal_velocity(&self, v_base: &Vector3<f64>) -> f64 {
+        match self {
+            StripPath::Straight(task) => task.vector_to_task(v_base).y,
+            StripPath::Contour { .. } => v_base.z,
+        }
+    }
+
     /// Heading of the strip's tangent at `s_m` (rad, from base +x towards +y) and its signed
     /// curvature (1/m): 0 and 0 on a straight strip.
     pub fn heading_at(&self, s_m: f64) -> (f64, f64) {

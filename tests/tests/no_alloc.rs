@@ -72,6 +72,13 @@ fn the_windowed_long_strip_does_not_allocate_in_the_loop() {
     servo_run_allocates_nothing("long_seal.toml", Some(4000));
 }
 
+/// A contour (issue 26): the plant's projection on the contour and the controller's moving frame
+/// and time law, through the approach, the first line, the first corner and into the second line.
+#[test]
+fn a_contour_run_does_not_allocate_in_the_loop() {
+    servo_run_allocates_nothing("sunroof.toml", Some(6000));
+}
+
 /// Counts the plant's and the controller's allocations over a lockstep servo run of the shipped
 /// scenario `name` (its first `ticks`, else the whole run).
 fn servo_run_allocates_nothing(name: &str, ticks: Option<u64>) {

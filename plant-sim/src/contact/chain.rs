@@ -216,9 +216,9 @@ impl ChainContact {
         let v = Vector3::new(twist_base[0], twist_base[1], twist_base[2]);
         let w = Vector3::new(twist_base[3], twist_base[4], twist_base[5]);
         let v_low = v + w.cross(&(d * self.geo.wheel_radius_m));
-        let p_low_task = self.geo.task.point_to_task(&p_low);
+        let p_low_task = self.geo.path.to_path(&p_low, self.z_a_m);
         self.z_a_m = p_low_task.z;
-        let y_wheel_end = p_low_task.y + self.geo.task.vector_to_task(&v_low).y * h;
+        let y_wheel_end = p_low_task.y + self.geo.path.normal_velocity(&v_low) * h;
 
         self.share = self.chain.share(self.z_a_m);
         let first = self.share.first;
@@ -420,7 +420,7 @@ mod tests {
 
     /// TCP (wheel centre) position and tool-down orientation for the wheel's lowest point at task (z, y).
     fn tcp_at(g: &ContactGeometry, z: f64, y_low: f64) -> (Vector3<f64>, Matrix3<f64>) {
-        let p = g.task.point_to_base(&Vector3::new(0.0, y_low + g.wheel_radius_m, z));
+        let p = g.path.point_to_base(&Vector3::new(0.0, y_low + g.wheel_radius_m, z));
         let pose = robot::tool_down_pose(p.x, p.y, p.z);
         (pose.translation.vector, pose.rotation.to_rotation_matrix().into_inner())
     }
@@ -440,7 +440,7 @@ mod tests {
         let g = ContactGeometry::from_scenario(&Scenario::default());
         let depth = 0.2e-3;
         for z in [chain.centre_m(3), 0.5 * (chain.centre_m(3) + chain.centre_m(4)), chain.centre_m(5) - 0.0013] {
-            let mut c = ChainContact::new(tables.clone(), chain.clone(), ChainSubstrate::flat(&chain, el), g).unwrap();
+            let mut c = ChainContact::new(tables.clone(), chain.clone(), ChainSubstrate::flat(&chain, el), g.clone()).unwrap();
             let (pos, rot) = tcp_at(&g, z, STRIP_TOP_HEIGHT_M - depth);
             for _ in 0..6000 {
                 c.substep(&pos, &rot, &Vec6::zeros());
