@@ -151,6 +151,7 @@ pub fn design(s: &Scenario, model: &StripModel, z_a_m: f64, out: &Path) -> anyho
                 series_of("loop gain L", &|r| db(r.loop_gain.norm())),
             ],
             hlines: vec![(0.0, "0 dB".into())],
+            vlines: Vec::new(),
         },
         &out.join("bode_magnitude"),
     )?);
@@ -168,6 +169,7 @@ pub fn design(s: &Scenario, model: &StripModel, z_a_m: f64, out: &Path) -> anyho
                 Series { label: "loop gain L".into(), points: lf.iter().cloned().zip(ph_l).collect() },
             ],
             hlines: vec![(-180.0, "-180 deg".into())],
+            vlines: Vec::new(),
         },
         &out.join("bode_phase"),
     )?);
@@ -178,6 +180,7 @@ pub fn design(s: &Scenario, model: &StripModel, z_a_m: f64, out: &Path) -> anyho
             y_label: "magnitude (dB)".into(),
             series: vec![series_of("S", &|r| db(r.sensitivity.norm())), series_of("T", &|r| db(r.complementary.norm()))],
             hlines: vec![(6.0, "6 dB".into()), (0.0, "0 dB".into())],
+            vlines: Vec::new(),
         },
         &out.join("sensitivity"),
     )?);
@@ -195,6 +198,7 @@ pub fn design(s: &Scenario, model: &StripModel, z_a_m: f64, out: &Path) -> anyho
                 Series { label: "contact force".into(), points: samples.iter().map(|x| (x.t_s, x.contact_force_n)).collect() },
             ],
             hlines: vec![],
+            vlines: Vec::new(),
         },
         &out.join("servo_1dof"),
     )?);
@@ -212,6 +216,7 @@ pub fn design(s: &Scenario, model: &StripModel, z_a_m: f64, out: &Path) -> anyho
                     .collect(),
             }],
             hlines: vec![(0.0, "0".into())],
+            vlines: Vec::new(),
         },
         &out.join("servo_1dof_error"),
     )?);

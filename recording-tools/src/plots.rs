@@ -20,6 +20,8 @@ pub struct LinePlot {
     pub series: Vec<Series>,
     /// (y, label) of dashed horizontal reference lines.
     pub hlines: Vec<(f64, String)>,
+    /// x of thin grey vertical markers (a contour's segment ends), the label written at the top.
+    pub vlines: Vec<(f64, String)>,
 }
 
 /// A histogram: bins as (left edge, right edge, count).
@@ -118,6 +120,11 @@ fn draw_lines<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, p: &LinePlot) ->
             .map_err(err)?
             .label(label.as_str())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1)));
+    }
+    for (x, label) in p.vlines.iter().filter(|v| v.0 >= x0 && v.0 <= x1) {
+        let grey = RGBColor(150, 150, 150);
+        chart.draw_series(std::iter::once(PathElement::new(vec![(*x, y0), (*x, y1)], grey.stroke_width(1)))).map_err(err)?;
+        chart.draw_series(std::iter::once(Text::new(label.clone(), (*x, y1), ("sans-serif", 12).into_font().color(&grey)))).map_err(err)?;
     }
     chart
         .configure_series_labels()

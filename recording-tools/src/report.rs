@@ -444,6 +444,7 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
                 points: roll.iter().map(|&i| (z_mm(i), rec.strip[i].bottom_force_n.abs())).collect(),
             }],
             hlines: Vec::new(),
+            vlines: Vec::new(),
         };
         let refs: Vec<(f64, f64)> = roll.iter().filter_map(|&i| ctrl[i].map(|c| (z_mm(i), rec.controller[c].force_ref_n.abs()))).collect();
         if !refs.is_empty() {
@@ -481,6 +482,7 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
                 y_label: "pressure under the wheel [kPa]".into(),
                 series: vec![Series { label: "under the wheel".into(), points }],
                 hlines: vec![(BOND_PRESSURE_PA * 1e-3, "100 kPa bond pressure".into())],
+                vlines: Vec::new(),
             };
             files.figures.extend(plots::save_lines(&plot, &out_dir.join("bond_pressure"))?);
         }
@@ -505,12 +507,16 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
             y_label: "bottom pressure [kPa]".into(),
             series,
             hlines: vec![(BOND_PRESSURE_PA * 1e-3, "100 kPa bond pressure".into())],
+            vlines: Vec::new(),
         };
         files.figures.extend(plots::save_lines(&plot, &out_dir.join("bottom_pressure"))?);
     }
 
     // The long seal's bond map (issue 25): the peak centre-line pressure along the whole strip,
     // and the force error of the rolling ticks against the wheel's position.
+    // A contour's segment ends, marked on the plots against the arc length.
+    let segment_ends: Vec<(f64, String)> =
+        n.contour.iter().flatten().map(|g| (g.from_m * 1e3, g.what.split(':').next().unwrap_or("").to_string())).collect();
     if let Some(b) = &n.bond_map {
         let peak: Vec<(f64, f64)> =
             b.peak_pa.iter().enumerate().filter_map(|(g, p)| p.map(|p| (g as f64 * b.step_m * 1e3, p * 1e-3))).collect();
@@ -521,6 +527,7 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
                 y_label: "peak bottom pressure [kPa]".into(),
                 series: vec![Series { label: "peak over the run".into(), points: peak }],
                 hlines: vec![(BOND_PRESSURE_PA * 1e-3, "100 kPa bond pressure".into())],
+                vlines: segment_ends.clone(),
             };
             files.figures.extend(plots::save_lines(&plot, &out_dir.join("bond_map"))?);
         }
@@ -534,6 +541,7 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
                 y_label: "|bottom force| - |set-point| [N]".into(),
                 series: vec![Series { label: "force error".into(), points: errors }],
                 hlines: vec![(0.45, "thesis bound +0.45 N".into()), (-0.45, "-0.45 N".into())],
+                vlines: segment_ends.clone(),
             };
             files.figures.extend(plots::save_lines(&plot, &out_dir.join("force_error_along"))?);
         }
@@ -553,6 +561,7 @@ pub fn write_report(rec: &Recording, out_dir: &std::path::Path, instants: &[f64]
                 })
                 .collect(),
             hlines: Vec::new(),
+            vlines: Vec::new(),
         };
         files.figures.extend(plots::save_lines(&plot, &out_dir.join("joint_torques"))?);
     }
