@@ -472,6 +472,7 @@ fn scene_config(
         tool: scenarios::geometry::tool(s),
         task_in_base: scenarios::geometry::TaskFrame::from_scenario(s).pose_in_base(),
         strip,
+        path: s.contour.is_given().then(|| scenarios::path::StripPath::from_scenario(s)),
     }
 }
 

@@ -26,6 +26,7 @@ fn main() {
             half_width_m: 0.004,
             windowed: false,
         }),
+        path: None,
     };
     let mut rec = recordings::TickRecord::default();
     rec.strip.n_centreline = 41;
@@ -39,7 +40,7 @@ fn main() {
     let n = 2000;
     let t = std::time::Instant::now();
     for i in 0..n {
-        encode_into(&scene_update(&cfg, &head, &z, &p, &u, i), &mut buf);
+        encode_into(&scene_update(&cfg, &head, &z, &p, &u, &[], i), &mut buf);
     }
     let scene = t.elapsed().as_secs_f64() / n as f64 * 1e6;
     let t = std::time::Instant::now();
@@ -48,7 +49,7 @@ fn main() {
     }
     let tf = t.elapsed().as_secs_f64() / n as f64 * 1e6;
     let mut c = zstd::bulk::Compressor::new(std::env::var("L").map_or(3, |v| v.parse().unwrap())).unwrap();
-    encode_into(&scene_update(&cfg, &head, &z, &p, &u, 1), &mut buf);
+    encode_into(&scene_update(&cfg, &head, &z, &p, &u, &[], 1), &mut buf);
     let t = std::time::Instant::now();
     for _ in 0..n {
         let _ = c.compress(&buf).unwrap();

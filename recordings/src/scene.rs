@@ -61,6 +61,26 @@ pub struct SceneConfig {
     pub task_in_base: Isometry3<f64>,
     /// The strip, if the scenario has one.
     pub strip: Option<StripGeometry>,
+    /// A contour's path (issue 26): the strip, the substrate and the force are drawn in `base`
+    /// along it (each point's path coordinates mapped by `StripPath::point_to_base`), the
+    /// substrate line coloured by the bond map so far; None: in `task`, straight.
+    pub path: Option<scenarios::path::StripPath>,
+}
+
+/// Grid of the scene's bond map along a contour, m (`bond_peak_pa[i]` at z = i step).
+pub const SCENE_BOND_STEP_M: f64 = 1e-3;
+
+/// Raises the running peak `peak_pa` (on the [`SCENE_BOND_STEP_M`] grid) with a tick's
+/// centre-line pressures at their z (nearest grid point): the bond map the contour's scene colours
+/// its substrate line with (the writer thread keeps it; the report's map interpolates).
+pub fn raise_bond_peak(peak_pa: &mut [f32], centreline_z_m: &[f32], pressure_pa: &[f32]) {
+    for (&z, &p) in centreline_z_m.iter().zip(pressure_pa) {
+        let g = (z as f64 / SCENE_BOND_STEP_M).round();
+        if g >= 0.0 && (g as usize) < peak_pa.len() {
+            let slot = &mut peak_pa[g as usize];
+            *slot = slot.max(p);
+        }
+    }
 }
 
 /// The strip as the scene draws it (task frame, m).
@@ -228,14 +248,29 @@ pub fn frame_transforms(robot: &Robot, cfg: &SceneConfig, q: &[f64; 6], ns: u64)
 /// centre-line bottom pressure at its z, [`pressure_colour`]), the substrate with its bulge,
 /// the colour scale with the 100 kPa bond line, the wheel, and the contact force as an arrow.
 /// `pressure_pa`, `top_uy_m`: the tick's centre-line values at the nodes `centreline_z_m`.
+/// Along a contour (`cfg.path`): the strip, the substrate and the force in `base`, the substrate
+/// line coloured by `bond_peak_pa` (the peak centre-line pressure per [`SCENE_BOND_STEP_M`] so
+/// far, [`raise_bond_peak`]); the colour scale stays in `task`, 0.2 m long.
 pub fn scene_update(
     cfg: &SceneConfig,
     r: &TickHead,
     centreline_z_m: &[f32],
     pressure_pa: &[f32],
     top_uy_m: &[f32],
+    bond_peak_pa: &[f32],
     ns: u64,
 ) -> SceneUpdate {
+    // Path coordinates to the drawn frame's: `task` itself, or `base` along a contour.
+    let strip_frame = if cfg.path.is_some() { "base" } else { "task" };
+    let place = |x: f64, y: f64, z: f64| -> Point3 {
+        match &cfg.path {
+            None => Point3 { x, y, z },
+            Some(path) => {
+                let b = path.point_to_base(&nalgebra::Vector3::new(x, y, z));
+                Point3 { x: quantise(b.x, POSITION_STEP_M), y: quantise(b.y, POSITION_STEP_M), z: quantise(b.z, POSITION_STEP_M) }
+            }
+        }
+    };
     let ts = Some(timestamp(ns));
     let entity = |id: &str, frame: &str| SceneEntity {
         timestamp: ts,
@@ -262,7 +297,7 @@ pub fn scene_update(
     entities.push(wheel);
     if let Some(g) = &cfg.strip {
         let s = &r.strip;
-        let mut strip = entity("strip", "task");
+        let mut strip = entity("strip", strip_frame);
         // A windowed strip: the layers within the tick's centre line (+ half an element for f32 z).
         let top: &[[f64; 3]] = match (g.windowed, centreline_z_m.first(), centreline_z_m.last()) {
             (true, Some(&lo), Some(&hi)) => {
@@ -288,7 +323,7 @@ pub fn scene_update(
                 uy += substrate_height(&g.substrate_zy_m, p[2], &mut at_s);
             }
             let z = quantise(p[2], POSITION_STEP_M);
-            points.push(Point3 { x: quantise(p[0], POSITION_STEP_M), y: quantise(p[1] + uy, POSITION_STEP_M), z });
+            points.push(place(quantise(p[0], POSITION_STEP_M), quantise(p[1] + uy, POSITION_STEP_M), z));
             // the colour of the vertex as drawn (at its rounded z)
             let c = pressure_colour(interp_from(centreline_z_m, pressure_pa, z, &mut at_p));
             colors.push(rgba(c.map(|v| quantise(v, COLOUR_STEP))));
@@ -307,23 +342,52 @@ pub fn scene_update(
         entities.push(strip);
 
         // The substrate's surface along the centre line: the bulge.
-        let mut substrate = entity("bulge", "task");
-        let points = g.substrate_zy_m.iter().map(|&[z, y]| Point3 { x: 0.0, y, z }).collect();
-        substrate.lines.push(LinePrimitive {
-            r#type: foxglove::messages::line_primitive::Type::LineStrip as i32,
-            pose: Some(at(-g.half_width_m - 1e-3, 0.0, 0.0)),
-            thickness: 0.6e-3,
-            scale_invariant: false,
-            points,
-            color: Some(rgba([0.2, 0.2, 0.2, 1.0])),
-            ..Default::default()
-        });
+        let mut substrate = entity("bulge", strip_frame);
+        if cfg.path.is_none() {
+            let points = g.substrate_zy_m.iter().map(|&[z, y]| Point3 { x: 0.0, y, z }).collect();
+            substrate.lines.push(LinePrimitive {
+                r#type: foxglove::messages::line_primitive::Type::LineStrip as i32,
+                pose: Some(at(-g.half_width_m - 1e-3, 0.0, 0.0)),
+                thickness: 0.6e-3,
+                scale_invariant: false,
+                points,
+                color: Some(rgba([0.2, 0.2, 0.2, 1.0])),
+                ..Default::default()
+            });
+        } else {
+            // The whole contour as a band beside the strip, coloured by the pressure each
+            // millimetre received so far (grey where the wheel has not been).
+            let points = g.substrate_zy_m.iter().map(|&[z, y]| place(-g.half_width_m - 1e-3, y, z)).collect();
+            let colors = g
+                .substrate_zy_m
+                .iter()
+                .map(|&[z, _]| {
+                    let peak = bond_peak_pa.get((z / SCENE_BOND_STEP_M).round() as usize).copied().unwrap_or(0.0);
+                    if peak > 0.0 {
+                        rgba(pressure_colour(peak as f64).map(|v| quantise(v, COLOUR_STEP)))
+                    } else {
+                        rgba([0.6, 0.6, 0.6, 1.0])
+                    }
+                })
+                .collect();
+            substrate.lines.push(LinePrimitive {
+                r#type: foxglove::messages::line_primitive::Type::LineStrip as i32,
+                pose: Some(at(0.0, 0.0, 0.0)),
+                thickness: 2e-3,
+                scale_invariant: false,
+                points,
+                colors,
+                ..Default::default()
+            });
+        }
         entities.push(substrate);
 
         // The colour scale beside the strip: 0..200 kPa along task z, the bond line at 100 kPa.
         let mut scale = entity("pressure_scale", "task");
         let (x0, cells) = (g.half_width_m + 6e-3, 20);
-        let cell_m = g.length_m / cells as f64;
+        // (a contour's strip is metres long and not along task z: a 0.2 m legend at its start)
+        let scale_m = if cfg.path.is_some() { 0.2 } else { g.length_m };
+        let cell_m = scale_m / cells as f64;
         for i in 0..cells {
             let p = COLOUR_SCALE_MAX_PA * (i as f64 + 0.5) / cells as f64;
             scale.cubes.push(CubePrimitive {
@@ -332,7 +396,7 @@ pub fn scene_update(
                 color: Some(rgba(pressure_colour(p))),
             });
         }
-        let z_bond = g.length_m * BOND_PRESSURE_PA / COLOUR_SCALE_MAX_PA;
+        let z_bond = scale_m * BOND_PRESSURE_PA / COLOUR_SCALE_MAX_PA;
         scale.lines.push(LinePrimitive {
             r#type: foxglove::messages::line_primitive::Type::LineStrip as i32,
             pose: Some(at(0.0, 0.0, 0.0)),
@@ -341,7 +405,7 @@ pub fn scene_update(
             color: Some(rgba([0.0, 0.0, 0.0, 1.0])),
             ..Default::default()
         });
-        for (z, text) in [(0.0, "0 kPa"), (z_bond, "100 kPa bond"), (g.length_m, "200 kPa")] {
+        for (z, text) in [(0.0, "0 kPa"), (z_bond, "100 kPa bond"), (scale_m, "200 kPa")] {
             scale.texts.push(TextPrimitive {
                 pose: Some(at(x0 + 4e-3, 1e-3, z)),
                 billboard: true,
@@ -355,13 +419,22 @@ pub fn scene_update(
 
         // The contact force on the strip: an arrow from above ending on the top under the wheel.
         let f = s.contact_force_n;
-        let mut arrow = entity("contact_force", "task");
+        let mut arrow = entity("contact_force", strip_frame);
         if f < 0.0 {
             let len = -f * ARROW_M_PER_N;
             let top = scenarios::geometry::STRIP_TOP_HEIGHT_M + s.top_displacement_m;
-            // The arrow points along its pose's +x: turned to -y (pressing).
-            let rot = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), -std::f64::consts::FRAC_PI_2);
-            let iso = Isometry3::from_parts(nalgebra::Translation3::new(0.0, top + len, s.wheel_z_m), rot);
+            // The arrow points along its pose's +x: turned to -y (pressing), or to -z in base.
+            let iso = match &cfg.path {
+                None => {
+                    let rot = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), -std::f64::consts::FRAC_PI_2);
+                    Isometry3::from_parts(nalgebra::Translation3::new(0.0, top + len, s.wheel_z_m), rot)
+                }
+                Some(path) => {
+                    let rot = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), std::f64::consts::FRAC_PI_2);
+                    let b = path.point_to_base(&nalgebra::Vector3::new(0.0, top + len, s.wheel_z_m));
+                    Isometry3::from_parts(nalgebra::Translation3::from(b), rot)
+                }
+            };
             arrow.arrows.push(ArrowPrimitive {
                 pose: Some(pose(&iso)),
                 shaft_length: 0.7 * len,
@@ -469,6 +542,7 @@ mod tests {
                 half_width_m: 4e-3,
                 windowed: true,
             }),
+            path: None,
         };
         let mut rec = crate::TickRecord::default();
         rec.strip.n_centreline = 61;
@@ -478,7 +552,7 @@ mod tests {
         let z: Vec<f32> = (0..61).map(|i| (0.07 + i as f64 * el) as f32).collect();
         let p: Vec<f32> = (0..61).map(|i| if i == 30 { 150e3 } else { 50e3 }).collect();
         let u = vec![0.0f32; 61];
-        let msg = scene_update(&cfg, &head, &z, &p, &u, 0);
+        let msg = scene_update(&cfg, &head, &z, &p, &u, &[], 0);
         let strip = msg.entities.iter().find(|e| e.id == "strip").unwrap();
         let tri = &strip.triangles[0];
         assert_eq!(tri.points.len(), 61 * per, "the 61 layers around the wheel");

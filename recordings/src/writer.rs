@@ -368,6 +368,12 @@ impl Recorder {
             moving_z: Vec::with_capacity(MAX_CENTRELINE),
             pressure: Vec::with_capacity(MAX_CENTRELINE),
             top_uy: Vec::with_capacity(MAX_CENTRELINE),
+            bond_peak: match cfg.scene.as_ref() {
+                Some(sc) if sc.path.is_some() => {
+                    vec![0.0; sc.strip.as_ref().map_or(0, |g| (g.length_m / crate::scene::SCENE_BOND_STEP_M).round() as usize + 1)]
+                }
+                _ => Vec::new(),
+            },
             fox,
             robot_description,
             scene_every: cfg.scene.as_ref().map_or(1, |s| s.every_ticks(cfg.period_s)),
@@ -574,6 +580,9 @@ struct WriterThread {
     pressure: Vec<f32>,
     /// Top centre-line displacements of the tick being written.
     top_uy: Vec<f32>,
+    /// A contour's scene: the peak centre-line pressure per millimetre so far (every tick's, not
+    /// just the scene's ticks); empty otherwise.
+    bond_peak: Vec<f32>,
     /// Ids of the Foxglove channels.
     fox: FoxgloveChannels,
     /// The `/robot_description` message (CDR), written once at the start of the file and offered
@@ -805,10 +814,12 @@ impl WriterThread {
             moving_z,
             pressure,
             top_uy,
+            bond_peak,
             robot_description,
             ..
         } = self;
         let centreline_z = if r.strip.centreline_dz_m > 0.0 { &*moving_z } else { &*centreline_z };
+        crate::scene::raise_bond_peak(bond_peak, centreline_z, pressure);
         let (Some(cfg), Some(robot)) = (scene.as_ref(), robot.as_ref()) else { return Ok(()) };
         if !r.state.tick.is_multiple_of(*scene_every) {
             return Ok(());
@@ -828,7 +839,7 @@ impl WriterThread {
             put(ch, buf)?;
         }
         if let Some(ch) = fox.scene {
-            let msg = crate::scene::scene_update(cfg, r, centreline_z, pressure, top_uy, log_time);
+            let msg = crate::scene::scene_update(cfg, r, centreline_z, pressure, top_uy, bond_peak, log_time);
             crate::scene::encode_into(&msg, buf);
             put(ch, buf)?;
         }

@@ -63,6 +63,54 @@ fn the_sunroof_lap_holds_the_force_through_the_corners_with_the_wheel_turned_alo
     let b = n.bond_map.as_ref().expect("the bond map");
     assert!(b.coverage_rolled > 0.9, "{}", b.coverage_rolled);
 
+    // The Foxglove scene draws the strip along the contour in `base`: every vertex of the strip
+    // around the wheel lies over the contour (within the strip's 4 mm half width, at most 10 mm
+    // above the table), near the wheel's arc length; the band beside it runs round the whole
+    // contour, and by the last scene every millimetre the wheel rolled is coloured by the
+    // pressure it received (grey only where it never pressed).
+    use foxglove::Decode;
+    let path = scenarios::path::StripPath::from_scenario(&s);
+    let bytes = std::fs::read(dir.join("run.mcap")).unwrap();
+    let (mut scenes, mut k, mut last_band) = (0, 0usize, None);
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        if m.channel.topic != "/strip_scene" {
+            continue;
+        }
+        let msg = foxglove::messages::SceneUpdate::decode(&m.data[..]).unwrap();
+        while k + 1 < rec.strip.len() && rec.log_time_ns[k] < m.log_time {
+            k += 1;
+        }
+        let wheel = rec.strip[k].wheel_z_m;
+        let strip = msg.entities.iter().find(|e| e.id == "strip").expect("the strip");
+        assert_eq!(strip.frame_id, "base");
+        for p in &strip.triangles[0].points {
+            let q = path.to_path(&nalgebra::Vector3::new(p.x, p.y, p.z), wheel);
+            assert!(
+                q.x.abs() <= 4.1e-3 && q.y > 0.0 && q.y < 10e-3 && (q.z - wheel).abs() < 0.1,
+                "vertex {p:?}: path {q} (wheel at {wheel})"
+            );
+        }
+        last_band = msg.entities.into_iter().find(|e| e.id == "bulge");
+        scenes += 1;
+    }
+    assert!(scenes > 1000, "{scenes} scenes");
+    let band = last_band.expect("the band along the contour");
+    let line = &band.lines[0];
+    assert_eq!((band.frame_id.as_str(), line.points.len(), line.colors.len()), ("base", line.points.len(), line.points.len()));
+    let grey = |c: &foxglove::messages::Color| c.r == c.g && c.g == c.b;
+    let rolled: Vec<bool> = line
+        .points
+        .iter()
+        .map(|p| path.to_path(&nalgebra::Vector3::new(p.x, p.y, p.z), 0.6).z)
+        .zip(&line.colors)
+        .filter(|(z, _)| *z > from + 2e-3 && *z < to - 2e-3)
+        .map(|(_, c)| !grey(c))
+        .collect();
+    let coloured = rolled.iter().filter(|&&c| c).count() as f64 / rolled.len() as f64;
+    eprintln!("scene: {scenes} scenes; the band along the contour coloured on {:.1} % of the rolled lap", coloured * 100.0);
+    assert!(rolled.len() > 1000 && coloured > 0.99, "{coloured}");
+
     // Joint 6 winds through the one turn the heading makes from z_start round to z_end (the same
     // point of the first line: 360°), as the arm turns the wheel along the contour.
     let q6 = |i: usize| rec.joint_state[i].q[5];
