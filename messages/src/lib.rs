@@ -231,11 +231,14 @@ pub struct ControllerDiagnostics {
     pub force_ref_n: f64,
     /// Measured force on the strip along task y (F_e's task-y component), N (same sign as `force_ref_n`).
     pub force_meas_n: f64,
-    /// TCP position reference in the task frame, m.
+    /// TCP position reference in the task frame, m (along a contour: path coordinates, lateral,
+    /// height, arc length; `scenarios::path`).
     pub pos_ref_task_m: [f64; 3],
-    /// TCP position error (reference - actual) in the task frame, m.
+    /// TCP position error (reference - actual) in the task frame, m (along a contour: in the
+    /// moving frame at the reference's arc length).
     pub pos_err_task_m: [f64; 3],
-    /// Orientation error as a rotation vector (log map on SO(3)), task axes, rad.
+    /// Orientation error as a rotation vector (log map on SO(3)), task axes (along a contour the
+    /// moving frame's), rad.
     pub rot_err_task_rad: [f64; 3],
     /// Integral state of the force loop, N s (0 if no integral action).
     pub force_integral_ns: f64,

@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use robot::{Robot, Vec6};
-use scenarios::geometry;
+
 use scenarios::{Boundary, Integrator, Scenario};
 
 use crate::contact::StripTables;
@@ -36,7 +36,7 @@ pub fn substep_s(s: &Scenario) -> f64 {
     s.loop_.period_s / s.loop_.substeps as f64
 }
 
-/// The plant robot of a scenario, built where the controller's is ([`geometry::plant_robot`]):
+/// The plant robot of a scenario, built where the controller's is ([`scenarios::geometry::plant_robot`]):
 /// the shared model with the plant's inertia mismatch on top.
 pub use scenarios::geometry::plant_robot;
 
@@ -184,7 +184,7 @@ fn not_sliding_windows(s: &Scenario) -> anyhow::Result<()> {
 }
 
 impl Physics {
-    /// Build the plant of a scenario, at rest in the start pose (IK of [`geometry::start_tcp_pose`]).
+    /// Build the plant of a scenario, at rest in the start pose (IK of [`scenarios::path::start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
         Physics::with_strip_tables(s, strip_tables(s, cache_dir)?)
@@ -221,7 +221,7 @@ impl Physics {
             None => None,
         };
         let robot = plant_robot(s);
-        let target = geometry::start_tcp_pose(s);
+        let target = scenarios::path::start_tcp_pose(s);
         let q = robot
             .ik_tcp(&target, &robot::ik_seed_tool_down())
             .with_context(|| format!("start pose {:?} of the scenario is not reachable", target.translation.vector))?;
@@ -510,7 +510,7 @@ mod tests {
         let s = scenario();
         let p = Physics::new(&s, Path::new("/nonexistent")).unwrap();
         let tcp = p.robot().tcp_pose(&p.q());
-        let err = (tcp.translation.vector - geometry::start_tcp_pose(&s).translation.vector).norm();
+        let err = (tcp.translation.vector - scenarios::geometry::start_tcp_pose(&s).translation.vector).norm();
         assert!(err < 1e-9, "TCP {err} m from the start pose");
         assert_eq!(p.qd(), Vec6::zeros());
     }

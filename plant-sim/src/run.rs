@@ -472,8 +472,10 @@ fn scene_config(
         tool: scenarios::geometry::tool(s),
         task_in_base: scenarios::geometry::TaskFrame::from_scenario(s).pose_in_base(),
         strip,
-        path: s.contour.is_given().then(|| scenarios::path::StripPath::from_scenario(s)),
+        path: None,
+        band_base: Vec::new(),
     }
+    .along(s.contour.is_given().then(|| scenarios::path::StripPath::from_scenario(s)))
 }
 
 #[cfg(test)]

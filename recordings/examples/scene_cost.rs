@@ -27,6 +27,7 @@ fn main() {
             windowed: false,
         }),
         path: None,
+        band_base: Vec::new(),
     };
     let mut rec = recordings::TickRecord::default();
     rec.strip.n_centreline = 41;

@@ -65,6 +65,33 @@ pub struct SceneConfig {
     /// along it (each point's path coordinates mapped by `StripPath::point_to_base`), the
     /// substrate line coloured by the bond map so far; None: in `task`, straight.
     pub path: Option<scenarios::path::StripPath>,
+    /// Along a contour: the band's points in `base` (one per substrate sample), computed once
+    /// ([`SceneConfig::along`]).
+    pub band_base: Vec<Point3>,
+}
+
+/// Along a contour the band round the whole path is sent with every this many scenes (its colours
+/// change only under the wheel; Foxglove keeps an entity until it is replaced): the band's 1227
+/// points on the sunroof cost the writer more than the rest of the scene at every scene.
+pub const BAND_EVERY_SCENES: u64 = 10;
+
+impl SceneConfig {
+    /// This scene drawn along `path` (None: unchanged), the band's base points computed here.
+    pub fn along(mut self, path: Option<scenarios::path::StripPath>) -> SceneConfig {
+        self.band_base = match (&path, &self.strip) {
+            (Some(p), Some(g)) => g
+                .substrate_zy_m
+                .iter()
+                .map(|&[z, y]| {
+                    let b = p.point_to_base(&nalgebra::Vector3::new(-g.half_width_m - 1e-3, y, z));
+                    Point3 { x: quantise(b.x, POSITION_STEP_M), y: quantise(b.y, POSITION_STEP_M), z: quantise(b.z, POSITION_STEP_M) }
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
+        self.path = path;
+        self
+    }
 }
 
 /// Grid of the scene's bond map along a contour, m (`bond_peak_pa[i]` at z = i step).
@@ -356,11 +383,14 @@ pub fn scene_update(
             });
         } else {
             // The whole contour as a band beside the strip, coloured by the pressure each
-            // millimetre received so far (grey where the wheel has not been).
-            let points = g.substrate_zy_m.iter().map(|&[z, y]| place(-g.half_width_m - 1e-3, y, z)).collect();
+            // millimetre received so far (grey where the wheel has not been); every
+            // BAND_EVERY_SCENES-th scene.
+            let every = cfg.every_ticks(r.state.period_s) * BAND_EVERY_SCENES;
+            let points = if r.state.tick.is_multiple_of(every) { cfg.band_base.clone() } else { Vec::new() };
             let colors = g
                 .substrate_zy_m
                 .iter()
+                .take(points.len())
                 .map(|&[z, _]| {
                     let peak = bond_peak_pa.get((z / SCENE_BOND_STEP_M).round() as usize).copied().unwrap_or(0.0);
                     if peak > 0.0 {
@@ -370,17 +400,22 @@ pub fn scene_update(
                     }
                 })
                 .collect();
-            substrate.lines.push(LinePrimitive {
-                r#type: foxglove::messages::line_primitive::Type::LineStrip as i32,
-                pose: Some(at(0.0, 0.0, 0.0)),
-                thickness: 2e-3,
-                scale_invariant: false,
-                points,
-                colors,
-                ..Default::default()
-            });
+            if !points.is_empty() {
+                substrate.lines.push(LinePrimitive {
+                    r#type: foxglove::messages::line_primitive::Type::LineStrip as i32,
+                    pose: Some(at(0.0, 0.0, 0.0)),
+                    thickness: 2e-3,
+                    scale_invariant: false,
+                    points,
+                    colors,
+                    ..Default::default()
+                });
+            }
         }
-        entities.push(substrate);
+        // (a scene without the band leaves the last one standing: no empty entity replaces it)
+        if !substrate.lines.is_empty() {
+            entities.push(substrate);
+        }
 
         // The colour scale beside the strip: 0..200 kPa along task z, the bond line at 100 kPa.
         let mut scale = entity("pressure_scale", "task");
@@ -543,6 +578,7 @@ mod tests {
                 windowed: true,
             }),
             path: None,
+            band_base: Vec::new(),
         };
         let mut rec = crate::TickRecord::default();
         rec.strip.n_centreline = 61;

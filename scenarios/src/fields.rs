@@ -268,7 +268,7 @@ fn contour_pieces(s: &Scenario) -> Result<(), RowError> {
             ),
         });
     }
-    if let Err(e) = crate::contour::reach_along(s, &contour) {
+    if let Err(e) = crate::path::reach_along(s, &contour) {
         let row = contour.at(e.s_m).piece;
         let col = if c.pieces[row][0] == 0.0 { 1 } else { 0 };
         return Err(RowError { row, col, value: c.pieces[row][col], why: format!("must stay where the arm can follow it: {e}") });
@@ -573,7 +573,7 @@ pub static FIELDS: &[Field] = &[
     Field { key: "mismatch.link_inertia_scale", kind: Kind::Floats(6), unit: "", range: range(lo_ex(0.0), hi_in(10.0)), rule: None, meaning: "Per link, the plant's mass and inertia against the controller's model (1 = exact; multiplies robot.plant_inertia_scale)." },    // [contour]
     Field {
         key: "contour.pieces",
-        kind: Kind::Rows { cols: &["line_mm", "radius_mm", "turn_deg"], ranges: &PIECE_RANGES, rows: RowsRule { text: "each be a line [length, 0, 0] or an arc [0, radius, turn], the radius at least 20 mm and the turn under 360°, a closed contour meeting its start with its tangent (contour::MIN_RADIUS_M, CLOSURE_TOLERANCE_M); the strip's run z_start_mm to z_end_mm must lie on it (strip.length_mm at most the contour's length plus 50 mm of overlap when closed, its length when open) and within the arm's reach, joint ranges and 10° of the wrist singularity (contour::Contour::joints_along)", check: contour_pieces } },
+        kind: Kind::Rows { cols: &["line_mm", "radius_mm", "turn_deg"], ranges: &PIECE_RANGES, rows: RowsRule { text: "each be a line [length, 0, 0] or an arc [0, radius, turn], the radius at least 20 mm and the turn under 360°, a closed contour meeting its start with its tangent (contour::MIN_RADIUS_M, CLOSURE_TOLERANCE_M); the strip's run z_start_mm to z_end_mm must lie on it (strip.length_mm at most the contour's length plus 50 mm of overlap when closed, its length when open) and within the arm's reach, joint ranges and 10° of the wrist singularity (path::reach_along, contour::Contour::joints_along)", check: contour_pieces } },
         unit: "mm, mm, °",
         range: ANY,
         rule: None,

@@ -138,16 +138,9 @@ pub fn start_tcp_task_m(s: &Scenario) -> Vector3<f64> {
 }
 
 /// The start pose of the TCP in the base frame, tool pointing down: [`start_tcp_task_m`]'s
-/// point (the plant starts at rest in its IK); over a contour, its point in path coordinates
-/// with the tool turned by the heading there ([`crate::contour::Contour::tcp_pose`]).
+/// point (the plant starts at rest in its IK). A straight strip's: along a contour the plant
+/// starts at `crate::path::start_tcp_pose`.
 pub fn start_tcp_pose(s: &Scenario) -> Isometry3<f64> {
-    if s.contour.is_given() {
-        // Over the contour at z_start, the tool turned about the normal by the heading there.
-        let path = crate::path::StripPath::from_scenario(s);
-        let c = path.contour().expect("a contour");
-        let p = path.point_to_base(&start_tcp_task_m(s));
-        return c.tcp_pose(s.trajectory.z_start_mm * 1e-3, p.z);
-    }
     let task = TaskFrame::from_scenario(s);
     let t = &s.trajectory;
     // On the strip top at z_start, then up by the approach height and the wheel radius, summed

@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::contour::Contour;
+use crate::contour::{Contour, ReachError};
 use crate::geometry::TaskFrame;
 use crate::Scenario;
 
@@ -69,7 +69,7 @@ impl StripPath {
         match self {
             StripPath::Straight(task) => task.point_to_task(p_base_m),
             StripPath::Contour { contour, table_z_m } => {
-                let (mut s, lateral) = contour.project([p_base_m.x, p_base_m.y]);
+                let (mut s, lateral) = contour.project_near([p_base_m.x, p_base_m.y], s_hint_m);
                 if contour.is_closed() {
                     let l = contour.length_m();
                     s += ((s_hint_m - s) / l).round() * l;
@@ -107,6 +107,33 @@ impl StripPath {
             }
         }
     }
+}
+
+/// The scenario's reach check along its contour: the roll from `trajectory.z_start_mm` to
+/// `z_end_mm` with the wheel on the undeformed strip, the arm the scenario's, seeded from the IK of
+/// the start pose as the plant seeds it.
+pub fn reach_along(s: &Scenario, contour: &Contour) -> Result<(), ReachError> {
+    let robot = crate::geometry::nominal_robot(s);
+    let tcp_z = s.placement.table_z_m + crate::geometry::STRIP_TOP_HEIGHT_M + s.robot.wheel_radius_mm * 1e-3;
+    let (from, to) = (s.trajectory.z_start_mm * 1e-3, s.trajectory.z_end_mm * 1e-3);
+    let seed = robot
+        .ik_tcp(&contour.tcp_pose(from, tcp_z), &robot::ik_seed_tool_down())
+        .map_err(|e| ReachError { s_m: from, why: format!("the start pose: {e}") })?;
+    contour.joints_along(&robot, tcp_z, from, to, &seed).map(|_| ())
+}
+
+/// The start pose of the TCP in the base frame: [`crate::geometry::start_tcp_pose`] on a straight
+/// strip; over a contour, [`crate::geometry::start_tcp_task_m`]'s point in path coordinates with
+/// the tool turned about the normal by the heading there ([`Contour::tcp_pose`]). The plant starts
+/// at rest in its IK.
+pub fn start_tcp_pose(s: &Scenario) -> nalgebra::Isometry3<f64> {
+    if !s.contour.is_given() {
+        return crate::geometry::start_tcp_pose(s);
+    }
+    let path = StripPath::from_scenario(s);
+    let c = path.contour().expect("a contour");
+    let p = path.point_to_base(&crate::geometry::start_tcp_task_m(s));
+    c.tcp_pose(s.trajectory.z_start_mm * 1e-3, p.z)
 }
 
 #[cfg(test)]

@@ -66,7 +66,7 @@ fn the_sunroof_lap_holds_the_force_through_the_corners_with_the_wheel_turned_alo
     // The Foxglove scene draws the strip along the contour in `base`: every vertex of the strip
     // around the wheel lies over the contour (within the strip's 4 mm half width, at most 10 mm
     // above the table), near the wheel's arc length; the band beside it runs round the whole
-    // contour, and by the last scene every millimetre the wheel rolled is coloured by the
+    // contour, and by the last scene that sends it every millimetre the wheel rolled is coloured by the
     // pressure it received (grey only where it never pressed).
     use foxglove::Decode;
     let path = scenarios::path::StripPath::from_scenario(&s);
@@ -91,7 +91,10 @@ fn the_sunroof_lap_holds_the_force_through_the_corners_with_the_wheel_turned_alo
                 "vertex {p:?}: path {q} (wheel at {wheel})"
             );
         }
-        last_band = msg.entities.into_iter().find(|e| e.id == "bulge");
+        // (the band comes with every 10th scene: `recordings::scene::BAND_EVERY_SCENES`)
+        if let Some(band) = msg.entities.into_iter().find(|e| e.id == "bulge") {
+            last_band = Some(band);
+        }
         scenes += 1;
     }
     assert!(scenes > 1000, "{scenes} scenes");
@@ -170,8 +173,9 @@ fn a_roll_started_in_a_corner_presses_and_rolls_as_from_a_line() {
     }
 }
 
-/// The same lap in real time. The host may stall the loop (held torques, skipped periods), so
-/// here the run tolerates long stalls (`HOST_STALLS_TOLERATED`); it must end normally with the
+/// The same lap in real time. The host may stall the loop (held torques, skipped periods) and
+/// the recorder's writer (a full queue drops ticks: exit 4), so here the run tolerates long
+/// stalls (`HOST_STALLS_TOLERATED`) and its recorder a 16 s queue; it must end normally with the
 /// whole lap rolled and no reflex, and when the host gave the loop every period its force holds
 /// the thesis' bound on every segment (the figures are printed either way).
 #[test]
@@ -180,10 +184,12 @@ fn the_sunroof_lap_runs_in_real_time() {
     let dir = temp_dir(&rig);
     let out = Command::new(bin("rig"))
         .args(["run", sunroof().to_str().unwrap(), "--mode", "realtime", "--set", "loop.max_consecutive_misses=1000"])
+        .args(["--set", "recording.queue_capacity=16384"])
         .args(["--out", dir.to_str().unwrap()])
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let tail: Vec<&str> = std::str::from_utf8(&out.stdout).unwrap_or("").lines().filter(|l| !l.starts_with("  z ")).collect();
+    assert_eq!(out.status.code(), Some(0), "{}\n{}", tail.join("\n"), String::from_utf8_lossy(&out.stderr));
     let rec = Recording::open_complete(dir.join("run.mcap")).expect("complete recording");
     let n = recording_tools::report::numbers(&rec);
     use recordings::EventKind;
