@@ -116,9 +116,12 @@ impl PeerWatch {
 }
 
 impl Drop for PeerWatch {
+    /// Stops the thread at once: it waits for its next scan parked, not asleep, so the unpark
+    /// ends the wait (a plain sleep cost the plant's exit up to a whole [`WATCH_PERIOD`]).
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::Release);
         if let Some(t) = self.thread.take() {
+            t.thread().unpark();
             let _ = t.join();
         }
     }
@@ -223,8 +226,15 @@ fn watch_thread(rig: &str, role: &str, watched: Watched, sh: &Shared, ready: &st
     };
     let mut known: (u128, u128) = (0, 0); // (followed publisher, its node)
     let mut monitor: Option<NodeMonitor> = None;
+    let mut next_scan = std::time::Instant::now() + WATCH_PERIOD;
     while !sh.stop.load(Ordering::Acquire) {
-        std::thread::sleep(WATCH_PERIOD);
+        // Parked until the next scan; `Drop` unparks it to stop (a spurious wake-up parks again).
+        let now = std::time::Instant::now();
+        if now < next_scan {
+            std::thread::park_timeout(next_scan - now);
+            continue;
+        }
+        next_scan = now + WATCH_PERIOD;
         let followed = sh.followed.load();
         if followed == 0 || sh.gone.load() == followed {
             continue;
