@@ -82,7 +82,7 @@ pub struct RecorderTuning {
     pub max_flush_interval: Duration,
     /// zstd level; 0 is zstd's default (3).
     pub compression_level: u32,
-    /// Writer sleep when the queue is empty.
+    /// Writer sleep when the queue is empty (parked: `finish` wakes it at once).
     pub idle_sleep: Duration,
     /// Bytes kept allocated past the end of the file after every chunk: room for the next chunk
     /// and for ending the file. None: twice the chunk size plus 64 KiB; 0: none (a full disk is
@@ -539,10 +539,14 @@ impl Recorder {
     }
 
     fn join(&mut self) -> Result<RecordingSummary, RecorderError> {
-        // Dropping the producer tells the writer that nothing more comes.
+        // Dropping the producer tells the writer that nothing more comes; the unpark ends its
+        // idle wait now rather than after `idle_sleep`.
         self.producer = None;
         match self.thread.take() {
-            Some(t) => t.join().map_err(|_| RecorderError::WriterPanicked { path: self.path.clone() }),
+            Some(t) => {
+                t.thread().unpark();
+                t.join().map_err(|_| RecorderError::WriterPanicked { path: self.path.clone() })
+            }
             None => Err(RecorderError::WriterPanicked { path: self.path.clone() }),
         }
     }
@@ -649,7 +653,9 @@ impl WriterThread {
                 break;
             } else {
                 self.maybe_flush();
-                std::thread::sleep(self.tuning.idle_sleep);
+                // Parked, so that `Recorder::join` ends the wait (a spurious wake-up only looks
+                // at the queue once more).
+                std::thread::park_timeout(self.tuning.idle_sleep);
             }
         }
         self.finalise();
