@@ -2,7 +2,8 @@
 //! wheel rolls the force tracking (thesis Figure 7.2, the 0.45 N band of Section 7.4) and the
 //! share of the rolled length pressed with at least 100 kPa (the bond criterion, Section 4.2).
 
-use crate::read::Recording;
+use crate::read::{Channels, Recording};
+use recordings::schema::Channel;
 use serde::Serialize;
 
 pub use crate::bond_map::BOND_PRESSURE_PA;
@@ -157,6 +158,12 @@ pub fn interpolate(z_nodes: &[f64], p: &[f32], z: f64) -> Option<f64> {
         p[j - 1] as f64 * (1.0 - w) + p[j] as f64 * w
     })
 }
+
+/// The channels [`numbers`] reads: a recording opened with only these
+/// ([`Recording::open_channels`]) gives the same numbers as one read whole
+/// (`/joint_torque`, `/wrench` and `/egm` are not decoded: two of the six per-tick channels).
+pub const NUMBERS_CHANNELS: Channels =
+    Channels::of(&[Channel::JointState, Channel::Strip, Channel::Controller, Channel::Timing, Channel::Events]);
 
 pub fn numbers(rec: &Recording) -> ReportNumbers {
     let bond_map = crate::bond_map::bond_map(rec);

@@ -99,3 +99,42 @@ fn report_writes_text_json_and_every_figure() {
     let svg = std::fs::read_to_string(out.join("bottom_pressure.svg")).unwrap();
     assert!(svg.contains("100 kPa bond pressure") && svg.contains("wheel at"), "legend missing");
 }
+
+/// `rig run`'s read-back decodes only the channels the numbers read
+/// (`report::NUMBERS_CHANNELS`): the same numbers and the same integrity verdict as a whole
+/// read, for a complete file, a cut one and one with a damaged chunk; the skipped channels'
+/// columns stay empty.
+#[test]
+fn the_summary_channels_give_the_numbers_of_the_whole_recording() {
+    use recording_tools::read::Channels;
+    let run = SyntheticRun { ticks: 2600, ..Default::default() };
+    let dir = std::env::temp_dir().join(format!("recordings-report-channels-{}", std::process::id()));
+    let path = dir.join("whole.mcap");
+    let mut cfg = RecorderConfig::new(&path, run.metadata());
+    cfg.chunk_size_bytes = 64 << 10;
+    run.record(cfg).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 3 / 5]).unwrap();
+    // One byte flipped in the middle of the file: inside a chunk, which then fails its CRC.
+    let damaged = dir.join("damaged.mcap");
+    let mut d = bytes.clone();
+    d[bytes.len() / 2] ^= 0x5a;
+    std::fs::write(&damaged, &d).unwrap();
+    for (p, kind) in [(&path, "complete"), (&cut, "cut"), (&damaged, "corrupt")] {
+        let whole = Recording::open(p).unwrap();
+        let some = Recording::open_channels(p, report::NUMBERS_CHANNELS).unwrap();
+        assert_eq!(whole.integrity, some.integrity, "{}", p.display());
+        assert_eq!(report::numbers(&some), report::numbers(&whole), "{}", p.display());
+        assert_eq!(report::numbers(&some).integrity, kind, "{}", p.display());
+        assert_eq!(recording_tools::cli::summary_numbers(p).unwrap(), report::numbers(&whole));
+        assert!(!whole.joint_torque.is_empty() && !whole.wrench.is_empty());
+        assert!(some.joint_torque.is_empty() && some.wrench.is_empty());
+        assert_eq!(
+            (some.joint_state.len(), some.strip.len(), some.timing.len()),
+            (whole.joint_state.len(), whole.strip.len(), whole.timing.len())
+        );
+        // No other channel: the integrity is still found from every chunk (and /joint_state).
+        assert_eq!(Recording::open_channels(p, Channels::of(&[])).unwrap().integrity, whole.integrity);
+    }
+}
