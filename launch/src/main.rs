@@ -339,7 +339,9 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 /// Supervise, print the summary (or the failure), return the exit code.
 fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> anyhow::Result<i32> {
     eprintln!("rig {}: plant {} + controller {}, scenario {}", l.rig, l.plant_bin.display(), l.controller, l.scenario.display());
-    let outcome = runtime()?.block_on(supervise::supervise(l))?;
+    // The summary's read-back overlaps the plant's teardown (not for `rig timing`, which prints
+    // no recording summary).
+    let (outcome, read_back) = runtime()?.block_on(supervise::supervise_reading_back(l, !timing))?;
     match &outcome.plant_summary {
         Some(v) => {
             if timing {
@@ -361,7 +363,7 @@ fn launch_and_report(l: &RigLaunch, timing: bool, json_out: Option<&Path>) -> an
             }
             print!("{}", summary::run_summary(v));
             let path = v.recording.as_deref().filter(|_| !timing);
-            let numbers = path.and_then(|path| match recording_tools::cli::summary_numbers(Path::new(path)) {
+            let numbers = path.and_then(|path| match read_back.unwrap_or_else(|| recording_tools::cli::summary_numbers(Path::new(path))) {
                 Ok(n) => Some(n),
                 Err(e) => {
                     eprintln!("rig: could not read back {path}: {e:#}");

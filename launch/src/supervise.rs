@@ -208,8 +208,21 @@ fn spawn(cmd: &mut Command, what: &str, bin: &Path) -> anyhow::Result<Child> {
     cmd.spawn().with_context(|| format!("starting the {what} {}", bin.display()))
 }
 
+/// The summary's numbers of the recording ([`recording_tools::cli::summary_numbers`]), read back
+/// while the plant tears down ([`supervise_reading_back`]).
+pub type ReadBack = anyhow::Result<recording_tools::report::ReportNumbers>;
+
 /// Start both daemons and supervise them until the run ends.
 pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
+    Ok(supervise_reading_back(l, false).await?.0)
+}
+
+/// [`supervise`], and with `read_back` the recording's summary numbers, read as soon as the
+/// plant's stdout ends: `plant-sim` closes it right after its summary line, once the recording is
+/// finished, and only then lets go of its iceoryx2 ports, its liveness watch and its claim on the
+/// rig (10-40 ms on an ext4 state directory, where each file removed frees blocks), so the read
+/// overlaps that teardown. None: not asked, or the plant printed no summary naming a recording.
+pub async fn supervise_reading_back(l: &RigLaunch, read_back: bool) -> anyhow::Result<(Outcome, Option<ReadBack>)> {
     let mut plant_cmd = Command::new(&l.plant_bin);
     plant_cmd
         .arg("--rig")
@@ -246,7 +259,12 @@ pub async fn supervise(l: &RigLaunch) -> anyhow::Result<Outcome> {
     let reader = tokio::spawn(async move {
         let mut s = String::new();
         let _ = plant_out.read_to_string(&mut s).await;
-        s
+        // The summary line is complete and the recording finished: read it back now, beside the
+        // plant's teardown (a plant that fails after this still has its summary printed, with
+        // these numbers, as before).
+        let path = read_back.then(|| last_summary(&s).and_then(Result::ok)?.recording).flatten();
+        let early = path.map(|p| tokio::task::spawn_blocking(move || recording_tools::cli::summary_numbers(Path::new(&p))));
+        (s, early)
     });
 
     let controller_bin = match &l.controller {
@@ -412,8 +430,7 @@ async fn plant_alone(plant: &mut Child) -> anyhow::Result<Ending> {
 /// read (a field missing) is a failed plant, named in the ending when the run reached its end
 /// (else said on stderr): rig does not guess the missing numbers.
 pub fn read_summary(ending: Ending, stdout: &str) -> (Ending, Option<recordings::PlantSummary>) {
-    let line = stdout.lines().rev().find_map(|line| serde_json::from_str::<serde_json::Value>(line).ok().filter(|v| v.is_object()));
-    match line.map(recordings::PlantSummary::from_value) {
+    match last_summary(stdout) {
         None => (ending, None),
         Some(Ok(s)) => (ending, Some(s)),
         Some(Err(e)) => match ending {
@@ -426,14 +443,28 @@ pub fn read_summary(ending: Ending, stdout: &str) -> (Ending, Option<recordings:
     }
 }
 
-/// The outcome with the plant's summary line, once its stdout is read to the end.
+/// The plant's summary: its stdout's last line that is a JSON object, read (None: no such line).
+fn last_summary(stdout: &str) -> Option<Result<recordings::PlantSummary, recordings::plant_summary::SummaryError>> {
+    let line = stdout.lines().rev().find_map(|line| serde_json::from_str::<serde_json::Value>(line).ok().filter(|v| v.is_object()));
+    line.map(recordings::PlantSummary::from_value)
+}
+
+/// What the task reading the plant's stdout hands back: the text, and the read-back it started.
+type Reader = tokio::task::JoinHandle<(String, Option<tokio::task::JoinHandle<ReadBack>>)>;
+
+/// The outcome with the plant's summary line, once its stdout is read to the end, and the
+/// read-back started then.
 async fn finish(
     ending: Ending,
-    reader: tokio::task::JoinHandle<String>,
+    reader: Reader,
     controller_exited_first: bool,
     plant_told: bool,
-) -> anyhow::Result<Outcome> {
-    let out = tokio::time::timeout(Duration::from_secs(5), reader).await.ok().and_then(|r| r.ok()).unwrap_or_default();
+) -> anyhow::Result<(Outcome, Option<ReadBack>)> {
+    let (out, early) = tokio::time::timeout(Duration::from_secs(5), reader).await.ok().and_then(|r| r.ok()).unwrap_or_default();
+    let read_back = match early {
+        Some(h) => Some(h.await.unwrap_or_else(|e| Err(anyhow::anyhow!("the read-back task failed: {e}")))),
+        None => None,
+    };
     let (ending, plant_summary) = read_summary(ending, &out);
     // A plant that exits 0 after a stop signal did not reach its end: rig stopped it because the
     // controller exited first, or somebody else stopped it.
@@ -448,5 +479,5 @@ async fn finish(
         }
         e => e,
     };
-    Ok(Outcome { ending, plant_summary })
+    Ok((Outcome { ending, plant_summary }, read_back))
 }

@@ -65,14 +65,34 @@ fn main() {
         host_probe: a.host_probe,
         host_probe_period_ns: a.host_probe_period_us * 1000,
     };
-    match plant_sim::run::run(&opts) {
+    let printed = plant_sim::run::run_reporting(&opts, |summary| {
         // Both writes tolerate a closed pipe: a launcher killed with SIGKILL leaves its end closed.
-        Ok(summary) => rig_process::host::print_stdout(&format!("{}\n", summary.to_summary(&a.rig).to_line())),
+        rig_process::host::print_stdout(&format!("{}\n", summary.to_summary(&a.rig).to_line()));
+        // Its last line: the end of stdout tells rig that the summary is whole and the recording
+        // finished, while the plant still tears down its ports (rig reads the recording back
+        // meanwhile).
+        close_stdout();
+    });
+    match printed {
+        Ok(_) => {}
         Err(e) => {
             rig_process::host::print_stderr(&format!("plant-sim: error: {e:#}\n"));
             // A host problem (rig name taken, shared memory unusable) has its own status.
             let code = e.downcast_ref::<rig_process::host::HostError>().map_or(1, rig_process::host::HostError::exit_code);
             std::process::exit(code);
+        }
+    }
+}
+
+/// Points stdout at /dev/null: the pipe to rig ends (EOF) while the process lives on, and a stray
+/// write later goes nowhere rather than failing.
+fn close_stdout() {
+    // SAFETY: open/dup2/close on descriptors this process owns; fd 1 stays valid throughout.
+    unsafe {
+        let null = libc::open(c"/dev/null".as_ptr(), libc::O_WRONLY | libc::O_CLOEXEC);
+        if null >= 0 {
+            libc::dup2(null, libc::STDOUT_FILENO);
+            libc::close(null);
         }
     }
 }

@@ -233,6 +233,15 @@ const LAUNCHER_EXIT_GRACE: std::time::Duration = std::time::Duration::from_milli
 
 /// Run the plant until the duration is reached or SIGINT/SIGTERM arrives.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
+    run_reporting(opts, |_| {})
+}
+
+/// [`run`], handing the summary to `report` as soon as the recording is finished, before the
+/// plant lets go of its iceoryx2 ports, its liveness watch and its claim on the rig name (on an
+/// ext4 state directory that teardown took 10-40 ms, 2026-12-06: each iceoryx2 file removed frees
+/// blocks). `plant-sim` prints its summary line there and closes its stdout, so `rig` reads the
+/// recording back meanwhile.
+pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> anyhow::Result<RunSummary> {
     let t_run = std::time::Instant::now();
     let launcher = crate::launcher::Launcher::now();
     messages::services::validate_rig_name(&opts.rig)?;
@@ -418,7 +427,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunSummary> {
         finish_ms = ms(t_end.elapsed()),
         "plant stopped"
     );
-    Ok(RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live, probe, egm })
+    let summary = RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live, probe, egm };
+    report(&summary);
+    // The ports, the liveness watch and the claim go now (dropped in reverse order).
+    Ok(summary)
 }
 
 /// What the recording's Foxglove channels draw: the scenario's tool and placement, and the strip
