@@ -429,7 +429,11 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     );
     let summary = RunSummary { stats, recording, drops, recording_stopped_early, mode, rt: rt_setup, live, probe, egm };
     report(&summary);
-    // The ports, the liveness watch and the claim go now (dropped in reverse order).
+    // The teardown: the watch's node (on its thread) and the ports' go side by side (each file
+    // removed from an ext4 state directory waits for its blocks to be freed), then the claim.
+    watch.stop_soon();
+    drop(ports);
+    drop(watch);
     Ok(summary)
 }
 

@@ -113,6 +113,15 @@ impl PeerWatch {
     pub fn companion(&self) -> u128 {
         self.shared.companion.load()
     }
+
+    /// Asks the thread to end without waiting for it: it tears its iceoryx2 node down while
+    /// the caller drops its own ports (the drop then joins it).
+    pub fn stop_soon(&self) {
+        self.shared.stop.store(true, Ordering::Release);
+        if let Some(t) = &self.thread {
+            t.thread().unpark();
+        }
+    }
 }
 
 impl Drop for PeerWatch {
