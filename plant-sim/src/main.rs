@@ -2,7 +2,8 @@
 //! [--live ADDR [--live-rate HZ]]`
 //! `plant-sim --rig NAME --scenario FILE [--mode realtime|lockstep] [--duration S] [--out FILE.mcap] [--cache-dir DIR] [--host-probe [--host-probe-period-us US]]`
 //!
-//! Runs the plant daemon; at exit prints one line of JSON with the run's summary on stdout.
+//! Runs the plant daemon; once its recording is finished prints one line of JSON with the run's
+//! summary on stdout and closes stdout, then releases its iceoryx2 ports and exits.
 //! Exit status: 0 run completed, 1 error, 69 the rig name is held by a live plant, 71 shared
 //! memory unusable (`rig_process::host`).
 
