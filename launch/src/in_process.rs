@@ -57,7 +57,7 @@ pub fn run(
 ) -> anyhow::Result<(recordings::PlantSummary, Option<CaseRows>)> {
     let s = Scenario::load(scenario_path)?;
     anyhow::ensure!(!s.egm.enabled, "--in-process: {} enables [egm]; the EGM path runs with its daemons only", scenario_path.display());
-    let text = std::fs::read_to_string(scenario_path).with_context(|| format!("reading {}", scenario_path.display()))?;
+    let text = scenarios::pieces_file::self_contained(scenario_path)?;
     let n_ticks = run_length(&s, duration_s)?.n_ticks;
     let physics = physics(&s)?;
     let path = keep.recording.filter(|_| s.recording.enabled).map(Path::to_path_buf);

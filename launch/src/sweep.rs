@@ -213,7 +213,8 @@ pub fn table(results: &[CaseResult]) -> String {
 /// Reads a base scenario as a TOML table (validated as a scenario first, so errors name it).
 pub fn load_base(path: &Path) -> anyhow::Result<toml::Table> {
     scenarios::Scenario::load(path)?;
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    // Cases are written elsewhere: a contour's pieces file goes inline.
+    let text = scenarios::pieces_file::self_contained(path)?;
     text.parse().with_context(|| format!("parsing {}", path.display()))
 }
 

@@ -246,8 +246,8 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     let launcher = crate::launcher::Launcher::now();
     messages::services::validate_rig_name(&opts.rig)?;
     let scenario = Scenario::load(&opts.scenario_path)?;
-    let scenario_text =
-        std::fs::read_to_string(&opts.scenario_path).with_context(|| format!("reading {}", opts.scenario_path.display()))?;
+    // The recording's copy needs no other file (a contour's pieces file inlined).
+    let scenario_text = scenarios::pieces_file::self_contained(&opts.scenario_path)?;
     let mode = opts.mode.unwrap_or(scenario.loop_.mode);
     let l = &scenario.loop_;
     let length = run_length(&scenario, opts.duration_s)?;

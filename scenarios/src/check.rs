@@ -14,7 +14,7 @@ use toml::de::{DeTable, DeValue};
 use toml::Spanned;
 
 use crate::fields::{self, fmt_num, fmt_value, lookup, Field, Kind, Range};
-use crate::{Place, Scenario, ScenarioError, MAX_FORCE_POINTS, MAX_SUBSTRATE_FEATURES};
+use crate::{Place, Scenario, ScenarioError, MAX_FORCE_POINTS};
 
 /// Where each field (and array element, `key[i]`) a file sets stands: its line and the byte
 /// range of its value.
@@ -30,6 +30,13 @@ impl Spans {
         let element = name.split(' ').next().unwrap_or(name);
         let array = name.split('[').next().unwrap_or(name);
         [name, element, array].iter().find_map(|k| self.at.get(*k)).map_or(Place::Default, |(line, _)| Place::Line(*line))
+    }
+
+    /// Makes `name` (a field the file does not set) be found on `other`'s line.
+    pub(crate) fn alias(&mut self, name: &str, other: &str) {
+        if let Some(&(line, _)) = self.at.get(other) {
+            self.at.insert(name.to_string(), (line, 0..0));
+        }
     }
 
     /// The innermost field or element whose value holds byte `pos` (the longest such key).
@@ -237,12 +244,10 @@ impl Walker<'_> {
                 }
                 None => self.bad(key, line, v, format!("must be an array of [z_mm, force_n] pairs, not {}", a_type(val))),
             },
-            Kind::Rows { cols, .. } => {
+            Kind::Rows { max_rows, cols, .. } => {
                 let shape = format!("[{}]", cols.join(", "));
                 match val.as_array() {
-                    Some(a) if a.len() > MAX_SUBSTRATE_FEATURES => {
-                        self.bad(key, line, v, format!("must have at most {MAX_SUBSTRATE_FEATURES} rows, not {}", a.len()))
-                    }
+                    Some(a) if a.len() > max_rows => self.bad(key, line, v, format!("must have at most {max_rows} rows, not {}", a.len())),
                     Some(a) => {
                         for (i, e) in a.iter().enumerate() {
                             let ek = format!("{key}[{i}]");
@@ -338,14 +343,10 @@ pub(crate) fn values(s: &Scenario, path: &Path, spans: Option<&Spans>) -> Result
                     in_range(format!("{}[{i}] force_n", f.key), force_n, &force, " N", pass)?;
                 }
             }
-            Kind::Rows { cols, ranges, rows } => {
+            Kind::Rows { max_rows, cols, ranges, rows } => {
                 let all = v.and_then(|v| v.as_array()).map_or(&[][..], |a| a.as_slice());
-                if all.len() > MAX_SUBSTRATE_FEATURES {
-                    return Err(bad(
-                        f.key.into(),
-                        format!("{} rows", all.len()),
-                        format!("must have at most {MAX_SUBSTRATE_FEATURES} rows"),
-                    ));
+                if all.len() > max_rows {
+                    return Err(bad(f.key.into(), format!("{} rows", all.len()), format!("must have at most {max_rows} rows")));
                 }
                 for (i, r) in all.iter().enumerate() {
                     let vals: Vec<f64> = r.as_array().into_iter().flatten().map(|x| as_f64(x).unwrap_or(f64::NAN)).collect();

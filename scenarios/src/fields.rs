@@ -6,7 +6,7 @@
 //! Values are in the units the file uses (mm where the name says `_mm`, µs for `_us`).
 
 use crate::geometry::STRIP_TOP_HEIGHT_M;
-use crate::{Scenario, MAX_FORCE_POINTS, MAX_SUBSTRATE_FEATURES};
+use crate::{Scenario, MAX_CONTOUR_PIECES, MAX_FORCE_POINTS, MAX_SUBSTRATE_FEATURES};
 
 /// What a field holds in the file.
 #[derive(Debug, Clone, Copy)]
@@ -27,9 +27,10 @@ pub enum Kind {
         z: Range,
         force: Range,
     },
-    /// `[[a, b, c], ...]`: at most `MAX_SUBSTRATE_FEATURES` rows of `cols.len()` numbers, column
-    /// i within `ranges[i]`; `rows` checks the rows against each other and the other fields.
+    /// `[[a, b, c], ...]`: at most `max_rows` rows of `cols.len()` numbers, column i within
+    /// `ranges[i]`; `rows` checks the rows against each other and the other fields.
     Rows {
+        max_rows: usize,
         cols: &'static [&'static str],
         ranges: &'static [Range],
         rows: RowsRule,
@@ -431,7 +432,7 @@ pub static FIELDS: &[Field] = &[
     // [substrate]
     Field {
         key: "substrate.bumps",
-        kind: Kind::Rows { cols: &["center_mm", "half_width_mm", "height_mm"], ranges: &BUMP_RANGES, rows: RowsRule { text: "lie on the strip (center_mm ± half_width_mm within [0, strip.length_mm]); only with strip.window_mm > 0", check: bumps_on_the_strip } },
+        kind: Kind::Rows { max_rows: MAX_SUBSTRATE_FEATURES, cols: &["center_mm", "half_width_mm", "height_mm"], ranges: &BUMP_RANGES, rows: RowsRule { text: "lie on the strip (center_mm ± half_width_mm within [0, strip.length_mm]); only with strip.window_mm > 0", check: bumps_on_the_strip } },
         unit: "mm",
         range: ANY,
         rule: None,
@@ -439,7 +440,7 @@ pub static FIELDS: &[Field] = &[
     },
     Field {
         key: "substrate.seams",
-        kind: Kind::Rows { cols: &["position_mm", "step_mm", "smoothing_mm"], ranges: &SEAM_RANGES, rows: RowsRule { text: "lie on the strip with their ramps (position_mm ± smoothing_mm / 2), ascending and not overlapping; only with strip.window_mm > 0", check: seams_apart } },
+        kind: Kind::Rows { max_rows: MAX_SUBSTRATE_FEATURES, cols: &["position_mm", "step_mm", "smoothing_mm"], ranges: &SEAM_RANGES, rows: RowsRule { text: "lie on the strip with their ramps (position_mm ± smoothing_mm / 2), ascending and not overlapping; only with strip.window_mm > 0", check: seams_apart } },
         unit: "mm",
         range: ANY,
         rule: None,
@@ -573,12 +574,13 @@ pub static FIELDS: &[Field] = &[
     Field { key: "mismatch.link_inertia_scale", kind: Kind::Floats(6), unit: "", range: range(lo_ex(0.0), hi_in(10.0)), rule: None, meaning: "Per link, the plant's mass and inertia against the controller's model (1 = exact; multiplies robot.plant_inertia_scale)." },    // [contour]
     Field {
         key: "contour.pieces",
-        kind: Kind::Rows { cols: &["line_mm", "radius_mm", "turn_deg"], ranges: &PIECE_RANGES, rows: RowsRule { text: "each be a line [length, 0, 0] or an arc [0, radius, turn], the radius at least 20 mm and the turn under 360°, a closed contour meeting its start with its tangent (contour::MIN_RADIUS_M, CLOSURE_TOLERANCE_M); the strip's run z_start_mm to z_end_mm must lie on it (strip.length_mm at most the contour's length plus 50 mm of overlap when closed, its length when open) and within the arm's reach, joint ranges and 10° of the wrist singularity (path::reach_along, contour::Contour::joints_along)", check: contour_pieces } },
+        kind: Kind::Rows { max_rows: MAX_CONTOUR_PIECES, cols: &["line_mm", "radius_mm", "turn_deg"], ranges: &PIECE_RANGES, rows: RowsRule { text: "each be a line [length, 0, 0] or an arc [0, radius, turn], the radius at least 20 mm and the turn under 360°, a closed contour meeting its start with its tangent (contour::MIN_RADIUS_M, CLOSURE_TOLERANCE_M); the strip's run z_start_mm to z_end_mm must lie on it (strip.length_mm at most the contour's length plus 50 mm of overlap when closed, its length when open) and within the arm's reach, joint ranges and 10° of the wrist singularity (path::reach_along, contour::Contour::joints_along)", check: contour_pieces } },
         unit: "mm, mm, °",
         range: ANY,
         rule: None,
         meaning: "A contour on the substrate (issue 26): pieces from the strip's start ([placement]) on, each continuing the tangent before it; the strip lies along it, its arc length the strip's z. Empty: the straight strip along base +x.",
     },
+    Field { key: "contour.pieces_file", kind: Kind::Text, unit: "", range: ANY, rule: None, meaning: "A file of segments giving contour.pieces instead, for long contours: one `line_mm, radius_mm, turn_deg` row per line, `#` comments; relative to the scenario file. Its rows are checked as contour.pieces' and refusals name its line; copies of the scenario (recordings, sweep and study cases) carry the rows inline." },
     num("contour.heading_deg", "°", range(lo_in(-360.0), hi_in(360.0)), "Heading of the contour at its start, from base +x towards base +y."),
     flag("contour.closed", "The contour closes on its start (a sunroof's opening)."),
     with_rule(
@@ -719,9 +721,9 @@ impl Field {
             Kind::Points { z, force } => {
                 format!("at most {MAX_FORCE_POINTS} points; z_mm in {}, strictly ascending; force_n in {}", z.text(), force.text())
             }
-            Kind::Rows { cols, ranges, rows } => {
+            Kind::Rows { max_rows, cols, ranges, rows } => {
                 let each = cols.iter().zip(ranges).map(|(c, r)| format!("{c} in {}", r.text())).collect::<Vec<_>>().join("; ");
-                format!("at most {MAX_SUBSTRATE_FEATURES} rows; {each}; {}", rows.text)
+                format!("at most {max_rows} rows; {each}; {}", rows.text)
             }
         };
         match self.rule {

@@ -18,6 +18,7 @@ pub use cell::{DrivesConfig, MismatchConfig, SensorConfig};
 pub mod contour;
 pub mod geometry;
 pub mod path;
+pub mod pieces_file;
 
 /// Where a value of a scenario comes from, for messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -445,8 +446,8 @@ pub struct SubstrateConfig {
     pub seams: Vec<[f64; 3]>,
 }
 
-/// Most pieces `contour.pieces` may hold.
-pub const MAX_CONTOUR_PIECES: usize = MAX_SUBSTRATE_FEATURES;
+/// Most pieces `contour.pieces` may hold (written inline or read from `contour.pieces_file`).
+pub const MAX_CONTOUR_PIECES: usize = 4096;
 
 /// A contour on the substrate (issue 26, `scenarios/src/contour.rs`): the strip's start is
 /// `[placement]`'s point, and it runs along these pieces from there, its arc length the strip's
@@ -459,6 +460,9 @@ pub struct ContourConfig {
     /// `[0, radius, turn]` (positive turn: to the left, seen from above), each continuing the
     /// tangent of the one before. Empty: no contour (the straight strip).
     pub pieces: Vec<[f64; 3]>,
+    /// A file of segments that gives `pieces` instead (`pieces_file.rs`), relative to the
+    /// scenario file. Empty: none.
+    pub pieces_file: String,
     /// Heading of the contour at its start, from base +x towards base +y, degrees.
     pub heading_deg: f64,
     /// The contour closes on its start (a sunroof's opening): its end must meet its start with
@@ -474,7 +478,15 @@ pub struct ContourConfig {
 
 impl Default for ContourConfig {
     fn default() -> Self {
-        Self { pieces: Vec::new(), heading_deg: 0.0, closed: false, speed_mm_s: 80.0, accel_mm_s2: 100.0, lateral_accel_mm_s2: 50.0 }
+        Self {
+            pieces: Vec::new(),
+            pieces_file: String::new(),
+            heading_deg: 0.0,
+            closed: false,
+            speed_mm_s: 80.0,
+            accel_mm_s2: 100.0,
+            lateral_accel_mm_s2: 50.0,
+        }
     }
 }
 
@@ -675,8 +687,43 @@ impl Scenario {
                 None => check::syntax_error(text, path, &e),
             }
         })?;
-        check::values(&s, path, Some(&spans))?;
+        let mut spans = spans;
+        let mut s = s;
+        let file = Self::read_pieces_file(&mut s, path, &mut spans)?;
+        check::values(&s, path, Some(&spans)).map_err(|e| match &file {
+            Some(f) => f.relocate(e),
+            None => e,
+        })?;
         Ok(s)
+    }
+
+    /// `contour.pieces_file`'s rows into `contour.pieces` (see `pieces_file`); errors about the
+    /// whole list then name the `pieces_file` line.
+    fn read_pieces_file(s: &mut Scenario, path: &Path, spans: &mut check::Spans) -> Result<Option<pieces_file::PiecesFile>, ScenarioError> {
+        let name = s.contour.pieces_file.clone();
+        if name.is_empty() {
+            return Ok(None);
+        }
+        let bad = |why: String| ScenarioError::Field {
+            path: path.to_path_buf(),
+            place: spans.place("contour.pieces_file"),
+            field: "contour.pieces_file".into(),
+            value: format!("{name:?}"),
+            why,
+        };
+        if !s.contour.pieces.is_empty() {
+            return Err(bad("must be left out when contour.pieces is given: a contour's pieces come from one place".into()));
+        }
+        let file_path = pieces_file::resolve(path, &name);
+        let file = match pieces_file::read(&file_path) {
+            Err(ScenarioError::Read { source, .. }) => {
+                return Err(bad(format!("must name a readable file of pieces ({}: {source})", file_path.display())))
+            }
+            other => other?,
+        };
+        s.contour.pieces = file.rows.clone();
+        spans.alias("contour.pieces", "contour.pieces_file");
+        Ok(Some(file))
     }
 
     /// Load and validate a scenario file.

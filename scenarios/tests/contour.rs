@@ -125,3 +125,113 @@ fn the_time_law_slows_in_arcs_and_integrates_consistently() {
     // Lower bound: the whole distance at the cruise speed.
     assert!(t_end > (to - from) / v_max);
 }
+
+/// `sunroof.toml` with its pieces replaced by `contour.pieces_file = file` (written in `dir`).
+fn sunroof_with_pieces_file(dir: &Path, file: &str) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(sunroof_path()).unwrap();
+    let start = text.find("pieces = [").unwrap();
+    let end = start + text[start..].find("\n]\n").unwrap() + 3;
+    let out = dir.join("sunroof_from_file.toml");
+    std::fs::write(&out, format!("{}pieces_file = {file:?}\n{}", &text[..start], &text[end..])).unwrap();
+    out
+}
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("pieces-file-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The shipped file of segments is the sunroof's nine pieces: the scenario that names it loads
+/// to the same scenario as the one that lists them, bit for bit.
+#[test]
+fn the_shipped_pieces_file_is_the_sunroofs_contour() {
+    let dir = temp_dir("shipped");
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("sunroof_pieces.txt");
+    let from_file = Scenario::load(&sunroof_with_pieces_file(&dir, shipped.to_str().unwrap())).unwrap();
+    let mut inline = Scenario::load(&sunroof_path()).unwrap();
+    inline.contour.pieces_file = shipped.to_str().unwrap().to_string();
+    assert_eq!(from_file, inline);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A long contour from a file: the sunroof with its lines cut into 3 mm pieces and its corners
+/// into 10° arcs (154 pieces, more than a scenario's substrate lists hold) is the same curve as
+/// the nine-piece one: same length and the same points to a nanometre. Its self-contained copy
+/// (as recordings and sweep cases carry it) loads without the file to the same scenario.
+#[test]
+fn a_long_pieces_file_is_the_same_curve_and_copies_inline() {
+    let dir = temp_dir("long");
+    let s9 = Scenario::load(&sunroof_path()).unwrap();
+    let mut rows = String::from("# the sunroof, finely cut\n");
+    let mut n = 0;
+    for &[line, radius, turn] in &s9.contour.pieces {
+        if line > 0.0 {
+            let k = (line / 3.0).round() as usize;
+            for _ in 0..k {
+                rows += &format!("{}, 0, 0\n", line / k as f64);
+            }
+            n += k;
+        } else {
+            for _ in 0..9 {
+                rows += &format!("0, {radius}, {}\n\n", turn / 9.0);
+            }
+            n += 9;
+        }
+    }
+    assert!(n > scenarios::MAX_SUBSTRATE_FEATURES, "{n} pieces");
+    std::fs::write(dir.join("fine.txt"), rows).unwrap();
+    let path = sunroof_with_pieces_file(&dir, "fine.txt");
+    let fine = Scenario::load(&path).unwrap();
+    assert_eq!(fine.contour.pieces.len(), n);
+    let (a, b) = (Contour::from_scenario(&s9).unwrap(), Contour::from_scenario(&fine).unwrap());
+    assert!((a.length_m() - b.length_m()).abs() < 1e-9, "{} vs {}", a.length_m(), b.length_m());
+    for k in 0..=1000 {
+        let s_m = k as f64 * a.length_m() / 1000.0;
+        let (p, q) = (a.at(s_m), b.at(s_m));
+        let d = (p.xy_base_m[0] - q.xy_base_m[0]).hypot(p.xy_base_m[1] - q.xy_base_m[1]);
+        assert!(d < 1e-9, "s = {s_m} m: {d} m apart");
+        assert!((p.curvature_per_m - q.curvature_per_m).abs() < 1e-9 || (s_m - b.at(s_m).s_m).abs() < 1e-12);
+    }
+    let copy = scenarios::pieces_file::self_contained(&path).unwrap();
+    assert!(!copy.lines().any(|l| l.starts_with("pieces_file")) && copy.contains("[contour]"), "{copy}");
+    let elsewhere = temp_dir("elsewhere").join("scenario.toml");
+    std::fs::write(&elsewhere, &copy).unwrap();
+    let mut again = Scenario::load(&elsewhere).unwrap();
+    again.contour.pieces_file = "fine.txt".into();
+    assert_eq!(again, fine);
+    // A file that names none is copied as written.
+    assert_eq!(scenarios::pieces_file::self_contained(&sunroof_path()).unwrap(), std::fs::read_to_string(sunroof_path()).unwrap());
+    std::fs::remove_dir_all(dir).unwrap();
+    std::fs::remove_dir_all(elsewhere.parent().unwrap()).unwrap();
+}
+
+/// A bad row in a pieces file is refused naming the pieces file, its line and the column; a
+/// scenario that gives both lists, or a file that is not there, is refused at the scenario's
+/// `pieces_file` line.
+#[test]
+fn pieces_file_refusals_name_the_file_and_line() {
+    let dir = temp_dir("bad");
+    let shipped = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("sunroof_pieces.txt")).unwrap();
+    // The second corner tighter than the wheel follows: file line 8 holds row 3.
+    let tight = shipped.replacen("0, 50, 90\n", "0, 10, 90\n", 1);
+    std::fs::write(dir.join("tight.txt"), &tight).unwrap();
+    let e = Scenario::load(&sunroof_with_pieces_file(&dir, "tight.txt")).unwrap_err();
+    assert_eq!(e.place(), Some(Place::Line(8)), "{e}");
+    assert_eq!(e.field(), Some("contour.pieces[3] radius_mm"), "{e}");
+    assert!(e.to_string().contains(&format!("{}", dir.join("tight.txt").display())), "{e}");
+    assert!(e.to_string().contains("the wheel follows 20.0 mm or more"), "{e}");
+
+    let p = sunroof_with_pieces_file(&dir, "missing.txt");
+    let e = Scenario::load(&p).unwrap_err();
+    let line = std::fs::read_to_string(&p).unwrap().lines().position(|l| l.starts_with("pieces_file")).unwrap() + 1;
+    assert_eq!((e.place(), e.field()), (Some(Place::Line(line)), Some("contour.pieces_file")), "{e}");
+    assert!(e.to_string().contains("must name a readable file of pieces"), "{e}");
+
+    let both = std::fs::read_to_string(&p).unwrap().replace("\npieces_file = ", "\npieces = [[1226, 0, 0]]\npieces_file = ");
+    std::fs::write(&p, both).unwrap();
+    let e = Scenario::load(&p).unwrap_err();
+    assert_eq!((e.place(), e.field()), (Some(Place::Line(line + 1)), Some("contour.pieces_file")), "{e}");
+    assert!(e.to_string().contains("must be left out when contour.pieces is given"), "{e}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

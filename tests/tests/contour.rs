@@ -202,3 +202,43 @@ fn the_sunroof_lap_runs_in_real_time() {
         assert!(worst <= 0.45, "{worst} N");
     }
 }
+
+/// A contour from a file of segments (`contour.pieces_file`): the sunroof with its pieces in the
+/// shipped `sunroof_pieces.txt` runs through the real daemons (both read the file) to the same
+/// physics, bit for bit, as the sunroof that lists them; its recording carries the pieces inline,
+/// so `rig report` gives the per-segment figures with the file gone.
+#[test]
+fn a_contour_from_a_file_of_segments_runs_as_the_inline_one() {
+    let rig = unique_rig("sunroof-file");
+    let dir = temp_dir(&rig);
+    let text = std::fs::read_to_string(sunroof()).unwrap();
+    let start = text.find("pieces = [").unwrap();
+    let end = start + text[start..].find("\n]\n").unwrap() + 3;
+    let pieces = dir.join("pieces.txt");
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/sunroof_pieces.txt"), &pieces).unwrap();
+    let scenario = dir.join("sunroof_file.toml");
+    std::fs::write(&scenario, format!("{}pieces_file = \"pieces.txt\"\n{}", &text[..start], &text[end..])).unwrap();
+    // To past the first corner: the phases before the roll and 400 mm of it.
+    let run = |path: &Path, out: &Path| {
+        let o = Command::new(bin("rig"))
+            .args(["run", path.to_str().unwrap(), "--mode", "lockstep", "--set", "trajectory.z_end_mm=400"])
+            .args(["--out", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        Recording::open_complete(out.join("run.mcap")).expect("complete recording")
+    };
+    let (from_file, inline) = (run(&scenario, &dir.join("file")), run(&sunroof(), &dir.join("inline")));
+    assert_eq!(physics_digest(&from_file), physics_digest(&inline));
+    std::fs::remove_file(&pieces).unwrap();
+    let stored = from_file.run_metadata().unwrap().scenario.unwrap().toml;
+    assert!(!stored.lines().any(|l| l.starts_with("pieces_file")), "{stored}");
+    let out = Command::new(bin("rig")).args(["report", dir.join("file/run.mcap").to_str().unwrap()]).output().unwrap();
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{report}{}", String::from_utf8_lossy(&out.stderr));
+    let n = recording_tools::report::numbers(&from_file);
+    assert_eq!(n.contour.as_ref().map(Vec::len), Some(10), "the segments' figures: {report}");
+    let mut figures = String::new();
+    recording_tools::contour_figures::format_text(n.contour.as_ref().unwrap(), &mut figures);
+    assert!(report.contains(figures.trim()), "rig report lacks the segments' figures:\n{figures}\nin\n{report}");
+}

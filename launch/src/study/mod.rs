@@ -98,7 +98,8 @@ pub fn plan(study: &Study, dir: &Path, resume: bool) -> anyhow::Result<()> {
         (false, Err(_)) => {}
     }
     std::fs::create_dir_all(dir.join("cases")).with_context(|| format!("creating {}", dir.display()))?;
-    let base_text = std::fs::read_to_string(&study.base).with_context(|| format!("reading {}", study.base.display()))?;
+    // Cases are written elsewhere: a contour's pieces file goes inline.
+    let base_text = scenarios::pieces_file::self_contained(&study.base)?;
     let base: toml::Table = base_text.parse().with_context(|| format!("parsing {}", study.base.display()))?;
     for (n, point) in study.points().iter().enumerate() {
         let cdir = case_dir(dir, n);
