@@ -496,8 +496,8 @@ impl ControllerPorts {
             let until = (due + w).min(deadline);
             while Instant::now() < until {
                 if self.state_pending() {
-                    // Consume the notification that comes with it, if it is already there.
-                    let _ = self.wait_state(Instant::now());
+                    // Its notification stays in the listener: the next wait drains it before it
+                    // sleeps (`drain_then_wait`), off the path from the state to the torque.
                     return Wake::Notified;
                 }
                 std::hint::spin_loop();
