@@ -113,3 +113,20 @@ fn the_top_line_on_scene_ticks_only_changes_nothing_the_recording_reads() {
     }
     assert!(top_seen, "the strip deformed under the wheel on some scene tick");
 }
+
+/// The window chain and the contour (`sunroof.toml` to 400 mm: the approach, the press, the
+/// first corner and the short side after it), pinned at 07b7d45 like `EXPECTED`: a refactor of
+/// the chain's contact, its record or the contour's path changes this digest. Through the
+/// daemons and in process alike.
+const CHAIN_EXPECTED: &str = "256ba038ac641808 (8101 states, 8101 wrenches, 8101 torques, 8101 strip records)";
+
+#[test]
+fn the_chain_on_the_contour_is_bit_identical_to_its_pinned_digest() {
+    for extra in [&[][..], &["--in-process"][..]] {
+        let mut args = vec!["--set", "trajectory.z_end_mm=400"];
+        args.extend_from_slice(extra);
+        let rec = lockstep("sunroof", &args);
+        assert!(rec.strip.len() > 5000, "a real run");
+        assert_eq!(physics_digest(&rec), CHAIN_EXPECTED, "sunroof {extra:?}: the chain's lockstep physics changed");
+    }
+}

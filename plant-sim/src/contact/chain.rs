@@ -31,7 +31,7 @@ use robot::Vec6;
 use scenarios::geometry::STRIP_TOP_HEIGHT_M;
 use strip::chain::{Feature, SubstrateProfile, WindowChain, WINDOW_END_ZONE_M};
 
-use super::{dot, ContactGeometry, StripContact, StripTables, WrenchOnTool, TABLE_STEP_M};
+use super::{dot, dot2, dot4, ContactGeometry, StripContact, StripTables, WrenchOnTool, TABLE_STEP_M};
 
 /// Window slots of the pool: two share the wheel's load, one relaxes behind them.
 pub const POOL: usize = 3;
@@ -236,7 +236,8 @@ impl ChainContact {
             let local = self.z_a_m - self.chain.offsets_m[s.window];
             if (0.0..=lw).contains(&local) {
                 let (g, f) = t.locate(local);
-                u_free += (1.0 - f) * dot(t.c_row(g), &s.x) + f * dot(t.c_row(g + 1), &s.x);
+                let [a, b] = dot2([t.c_row(g), t.c_row(g + 1)], &s.x);
+                u_free += (1.0 - f) * a + f * b;
             }
         }
         // One-substep compliance under the wheel: window k carries φ_k of the force.
@@ -347,18 +348,36 @@ impl ChainContact {
             let phi = self.weight_of(k);
             let (g, sf) = t.locate(self.z_a_m - self.chain.offsets_m[k]);
             let (d0, d1) = (&t.d_cl[g * n_cl..(g + 1) * n_cl], &t.d_cl[(g + 1) * n_cl..(g + 2) * n_cl]);
-            for c in 0..n_cl {
+            let kept = |c: usize| {
                 let z = c as f64 * self.element_m;
                 let dropped = (k > 0 && z < WINDOW_END_ZONE_M) || (k < last && z > self.chain.window_length_m - WINDOW_END_ZONE_M);
-                if dropped || first + c >= count {
-                    continue;
-                }
-                let mut reaction = if s.live { dot(&tables.ccl[c * m2..(c + 1) * m2], &s.x) } else { 0.0 };
+                !dropped && first + c < count
+            };
+            let mut add = |c: usize, from_state: f64| {
+                let mut reaction = from_state;
                 if phi != 0.0 {
                     reaction += ((1.0 - sf) * d0[c] + sf * d1[c]) * phi * f;
                 }
                 out[first + c] += reaction;
+            };
+            if !s.live {
+                (0..n_cl).filter(|&c| kept(c)).for_each(|c| add(c, 0.0));
+                continue;
             }
+            // The layers' reactions from the state, four rows per pass over x (`dot4`: each bit
+            // for bit its `dot`): two thirds of the chain's per-tick dot products are here.
+            let row = |c: usize| &tables.ccl[c * m2..(c + 1) * m2];
+            let (mut batch, mut n) = ([0usize; 4], 0);
+            for c in (0..n_cl).filter(|&c| kept(c)) {
+                batch[n] = c;
+                n += 1;
+                if n == 4 {
+                    let y = dot4(batch.map(row), &s.x);
+                    batch.iter().zip(y).for_each(|(&c, y)| add(c, y));
+                    n = 0;
+                }
+            }
+            batch[..n].iter().for_each(|&c| add(c, dot(row(c), &s.x)));
         }
         let layers = self.substrate.centre_reaction_n.len();
         for (i, p) in out.iter_mut().enumerate() {
