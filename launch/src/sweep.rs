@@ -254,7 +254,7 @@ impl SharedStrips {
     /// the first to build them instead of building them twice.
     pub fn physics(&self, s: &scenarios::Scenario) -> anyhow::Result<plant_sim::physics::Physics> {
         if !s.strip.enabled {
-            return plant_sim::physics::Physics::with_strip_tables(s, None);
+            return plant_sim::physics::Physics::with_strip_tables(s, None, &self.cache_dir);
         }
         let params = plant_sim::contact::strip_params(s).with_reference_bulge();
         let h = plant_sim::physics::substep_s(s);
@@ -270,7 +270,7 @@ impl SharedStrips {
                 }
             }
         };
-        plant_sim::physics::Physics::with_strip_tables(s, Some(tables))
+        plant_sim::physics::Physics::with_strip_tables(s, Some(tables), &self.cache_dir)
     }
 }
 

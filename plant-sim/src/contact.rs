@@ -458,9 +458,6 @@ impl WrenchOnTool {
 pub(crate) struct TableParts(Vec<Vec<f64>>);
 
 impl TableParts {
-    pub(crate) fn len_f64(&self) -> usize {
-        self.0.iter().map(Vec::len).sum()
-    }
     pub(crate) fn vecs(&self) -> &[Vec<f64>] {
         &self.0
     }

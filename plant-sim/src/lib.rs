@@ -19,6 +19,7 @@ pub mod sensor;
 pub mod signals;
 mod stack_text;
 pub mod stats;
+pub mod substrate_cache;
 pub mod table_cache;
 pub mod tick;
 pub mod tick_events;

@@ -104,22 +104,40 @@ fn tables_of(params: &strip::StripParams, h_s: f64, cache_dir: &Path) -> anyhow:
 }
 
 /// The chain contact of a windowed scenario on the window's `tables`: the chain of windows and
-/// the substrate's static offsets (solved on the window's full FE model; a flat substrate needs
-/// none).
-fn chain_contact(s: &Scenario, tables: Arc<StripTables>) -> anyhow::Result<crate::contact::chain::ChainContact> {
+/// the substrate's static offsets (solved on the window's full FE model, or loaded from
+/// `cache_dir` where an earlier run solved them: `substrate_cache`; a flat substrate needs none).
+fn chain_contact(s: &Scenario, tables: Arc<StripTables>, cache_dir: &Path) -> anyhow::Result<crate::contact::chain::ChainContact> {
     use crate::contact::chain::{substrate_profile, ChainContact, ChainSubstrate};
     let st = &s.strip;
-    let chain = strip::chain::WindowChain::new(st.length_mm * 1e-3, st.window_mm * 1e-3, st.window_spacing_mm * 1e-3, st.element_mm * 1e-3)
+    let element_m = st.element_mm * 1e-3;
+    let chain = strip::chain::WindowChain::new(st.length_mm * 1e-3, st.window_mm * 1e-3, st.window_spacing_mm * 1e-3, element_m)
         .context("the window chain of the long strip")?;
     let profile = substrate_profile(s);
     let substrate = if profile.features.is_empty() {
-        ChainSubstrate::flat(&chain, st.element_mm * 1e-3)
+        ChainSubstrate::flat(&chain, element_m)
     } else {
         let t0 = std::time::Instant::now();
-        let full = strip::chain::FullStatics::build(&window_params(s)).context("the window's full FE model (substrate offsets)")?;
-        let sub = ChainSubstrate::new(&tables, &chain, &full, &profile);
-        tracing::info!(ms = t0.elapsed().as_secs_f64() * 1e3, windows = chain.len(), "substrate offsets of the long strip solved");
-        sub
+        let window = window_params(s);
+        let path = crate::substrate_cache::path(cache_dir, &window, &chain, element_m, &profile);
+        match crate::substrate_cache::load(&path, &chain, element_m) {
+            Some(sub) => {
+                tracing::info!(load_ms = t0.elapsed().as_secs_f64() * 1e3, "substrate offsets loaded from {}", path.display());
+                sub
+            }
+            None => {
+                let full = strip::chain::FullStatics::build(&window).context("the window's full FE model (substrate offsets)")?;
+                let sub = ChainSubstrate::new(&tables, &chain, &full, &profile);
+                if let Err(e) = crate::substrate_cache::save(&sub, &path) {
+                    tracing::warn!("could not cache the substrate offsets in {}: {e}", path.display());
+                }
+                tracing::info!(
+                    ms = t0.elapsed().as_secs_f64() * 1e3,
+                    windows = chain.len(),
+                    "substrate offsets of the long strip solved and cached"
+                );
+                sub
+            }
+        }
     };
     ChainContact::new(tables, chain, substrate, crate::contact::ContactGeometry::from_scenario(s))
 }
@@ -187,14 +205,15 @@ impl Physics {
     /// Build the plant of a scenario, at rest in the start pose (IK of [`scenarios::path::start_tcp_pose`]).
     /// `cache_dir` is where a reduced strip model is cached (unused while the plant is robot-only).
     pub fn new(s: &Scenario, cache_dir: &Path) -> anyhow::Result<Physics> {
-        Physics::with_strip_tables(s, strip_tables(s, cache_dir)?)
+        Physics::with_strip_tables(s, strip_tables(s, cache_dir)?, cache_dir)
     }
 
     /// [`Physics::new`] with the strip's tables given (`rig sweep` builds them once for all its
     /// cases). `tables` must be those of the scenario's strip at the reference bump
     /// (`contact::strip_params(s).with_reference_bulge()`) and substep; this plant scales their
-    /// bump to the scenario's height. None without the strip.
-    pub fn with_strip_tables(s: &Scenario, tables: Option<Arc<StripTables>>) -> anyhow::Result<Physics> {
+    /// bump to the scenario's height. None without the strip. A windowed strip's substrate
+    /// offsets are cached in `cache_dir` (`substrate_cache`).
+    pub fn with_strip_tables(s: &Scenario, tables: Option<Arc<StripTables>>, cache_dir: &Path) -> anyhow::Result<Physics> {
         not_sliding_windows(s)?;
         anyhow::ensure!(tables.is_some() == s.strip.enabled, "strip tables are needed exactly when strip.enabled");
         let mut chain = None;
@@ -205,7 +224,7 @@ impl Physics {
                     "the strip tables are not the scenario's window (substep {} s)",
                     substep_s(s)
                 );
-                chain = Some(chain_contact(s, tables)?);
+                chain = Some(chain_contact(s, tables, cache_dir)?);
                 None
             }
             Some(tables) => {

@@ -32,10 +32,21 @@ pub fn path(dir: &Path, reference: &StripParams, h_s: f64) -> PathBuf {
 
 /// Write `t` to `path` atomically.
 pub fn save(t: &StripTables, path: &Path) -> std::io::Result<()> {
-    let parts = t.parts();
-    let mut buf = Vec::with_capacity(8 * parts.len_f64() + 1024);
-    buf.extend_from_slice(MAGIC);
-    for v in parts.vecs() {
+    write_vecs(path, MAGIC, t.parts().vecs())
+}
+
+/// The tables cached at `path` for `reference` and `h_s`; None when there is no usable file.
+pub fn load(path: &Path, reference: &StripParams, h_s: f64) -> Option<StripTables> {
+    StripTables::from_parts(reference.clone(), h_s, TableParts::from_vecs(read_vecs(path, MAGIC)?)?)
+}
+
+/// The cache files' format (here and `substrate_cache`): `magic`, then each vector as its length
+/// (u64) and its values, little-endian. Written to a temporary file, synced and renamed, so a
+/// reader never sees half a file.
+pub(crate) fn write_vecs(path: &Path, magic: &[u8; 8], vecs: &[Vec<f64>]) -> std::io::Result<()> {
+    let mut buf = Vec::with_capacity(8 * vecs.iter().map(|v| v.len() + 1).sum::<usize>() + 8);
+    buf.extend_from_slice(magic);
+    for v in vecs {
         buf.extend_from_slice(&(v.len() as u64).to_le_bytes());
         for x in v {
             buf.extend_from_slice(&x.to_le_bytes());
@@ -53,10 +64,10 @@ pub fn save(t: &StripTables, path: &Path) -> std::io::Result<()> {
     std::fs::rename(&tmp, path)
 }
 
-/// The tables cached at `path` for `reference` and `h_s`; None when there is no usable file.
-pub fn load(path: &Path, reference: &StripParams, h_s: f64) -> Option<StripTables> {
+/// [`write_vecs`]' vectors from `path`, bit for bit; None for a missing, foreign or cut file.
+pub(crate) fn read_vecs(path: &Path, magic: &[u8; 8]) -> Option<Vec<Vec<f64>>> {
     let bytes = std::fs::read(path).ok()?;
-    let rest = bytes.strip_prefix(MAGIC.as_slice())?;
+    let rest = bytes.strip_prefix(magic.as_slice())?;
     let mut vecs = Vec::new();
     let mut at = 0;
     while at < rest.len() {
@@ -66,7 +77,7 @@ pub fn load(path: &Path, reference: &StripParams, h_s: f64) -> Option<StripTable
         vecs.push(body.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8]))).collect::<Vec<f64>>());
         at += 8 * n;
     }
-    StripTables::from_parts(reference.clone(), h_s, TableParts::from_vecs(vecs)?)
+    Some(vecs)
 }
 
 #[cfg(test)]

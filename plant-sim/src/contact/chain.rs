@@ -128,6 +128,20 @@ impl ChainSubstrate {
         ChainSubstrate { surface_m, centre_reaction_n }
     }
 
+    /// The two tables as plain vectors, for the on-disk cache (`substrate_cache`).
+    pub(crate) fn to_vecs(&self) -> Vec<Vec<f64>> {
+        vec![self.surface_m.clone(), self.centre_reaction_n.clone()]
+    }
+
+    /// [`Self::to_vecs`] back, for a chain of `chain`'s length with `element_m` layers; None when
+    /// the sizes do not fit it.
+    pub(crate) fn from_vecs(mut v: Vec<Vec<f64>>, chain: &WindowChain, element_m: f64) -> Option<ChainSubstrate> {
+        let flat = ChainSubstrate::flat(chain, element_m);
+        let (centre_reaction_n, surface_m) = (v.pop()?, v.pop()?);
+        let fits = v.is_empty() && surface_m.len() == flat.surface_m.len() && centre_reaction_n.len() == flat.centre_reaction_n.len();
+        fits.then_some(ChainSubstrate { surface_m, centre_reaction_n })
+    }
+
     /// A flat substrate (no offsets) for a strip of `layers` layers and `n` grid points.
     pub fn flat(chain: &WindowChain, element_m: f64) -> ChainSubstrate {
         let layers = (chain.strip_length_m / element_m).round() as usize + 1;
