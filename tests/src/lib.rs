@@ -377,6 +377,26 @@ pub fn physics_digest(rec: &recording_tools::read::Recording) -> String {
     )
 }
 
+/// Each `/strip_scene` of the MCAP file at `path` (the recording `rec` read from it), decoded,
+/// with the wheel's z (m) of the strip record logged last before it: what the scene tests walk.
+pub fn strip_scenes(path: &Path, rec: &recording_tools::read::Recording) -> Vec<(f64, foxglove::messages::SceneUpdate)> {
+    use foxglove::Decode;
+    let bytes = std::fs::read(path).unwrap();
+    let mut k = 0usize;
+    let mut out = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        if m.channel.topic != "/strip_scene" {
+            continue;
+        }
+        while k + 1 < rec.strip.len() && rec.log_time_ns[k] < m.log_time {
+            k += 1;
+        }
+        out.push((rec.strip[k].wheel_z_m, foxglove::messages::SceneUpdate::decode(&m.data[..]).unwrap()));
+    }
+    out
+}
+
 /// An executable script `dir/name` that runs `program` with `args` before the arguments it gets
 /// (`rig run --controller` takes a path without arguments: this is how a test gives them).
 pub fn exec_wrapper(dir: &Path, name: &str, program: &Path, args: &[&str]) -> PathBuf {

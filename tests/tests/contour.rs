@@ -68,20 +68,9 @@ fn the_sunroof_lap_holds_the_force_through_the_corners_with_the_wheel_turned_alo
     // above the table), near the wheel's arc length; the band beside it runs round the whole
     // contour, and by the last scene that sends it every millimetre the wheel rolled is coloured by the
     // pressure it received (grey only where it never pressed).
-    use foxglove::Decode;
     let path = scenarios::path::StripPath::from_scenario(&s);
-    let bytes = std::fs::read(dir.join("run.mcap")).unwrap();
-    let (mut scenes, mut k, mut last_band) = (0, 0usize, None);
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        let m = m.unwrap();
-        if m.channel.topic != "/strip_scene" {
-            continue;
-        }
-        let msg = foxglove::messages::SceneUpdate::decode(&m.data[..]).unwrap();
-        while k + 1 < rec.strip.len() && rec.log_time_ns[k] < m.log_time {
-            k += 1;
-        }
-        let wheel = rec.strip[k].wheel_z_m;
+    let (mut scenes, mut last_band) = (0, None);
+    for (wheel, msg) in strip_scenes(&dir.join("run.mcap"), &rec) {
         let strip = msg.entities.iter().find(|e| e.id == "strip").expect("the strip");
         assert_eq!(strip.frame_id, "base");
         for p in &strip.triangles[0].points {

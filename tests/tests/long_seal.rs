@@ -137,20 +137,9 @@ fn long_seal_hands_over_between_windows_without_a_force_step_and_tracks_within_t
     // The Foxglove scene: each `/strip_scene` draws the strip's top around the wheel (within a
     // window and a spacing of it) and the substrate along the whole strip, its profile the
     // scenario's bumps, dips and seam (`strip::chain::SubstrateProfile`, closed form).
-    use foxglove::Decode;
     let profile = plant_sim::contact::chain::substrate_profile(&s);
-    let bytes = std::fs::read(&out).unwrap();
-    let (mut scenes, mut k) = (0, 0usize);
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        let m = m.unwrap();
-        if m.channel.topic != "/strip_scene" {
-            continue;
-        }
-        let msg = foxglove::messages::SceneUpdate::decode(&m.data[..]).unwrap();
-        while k + 1 < rec.strip.len() && rec.log_time_ns[k] < m.log_time {
-            k += 1;
-        }
-        let wheel = rec.strip[k].wheel_z_m;
+    let mut scenes = 0;
+    for (wheel, msg) in strip_scenes(&out, &rec) {
         let strip = msg.entities.iter().find(|e| e.id == "strip").expect("the strip");
         let z: Vec<f64> = strip.triangles[0].points.iter().map(|p| p.z).collect();
         let (lo, hi) = (z.iter().copied().fold(f64::INFINITY, f64::min), z.iter().copied().fold(f64::NEG_INFINITY, f64::max));
