@@ -200,24 +200,27 @@ fn the_sunroof_lap_runs_in_real_time() {
 fn a_contour_from_a_file_of_segments_runs_as_the_inline_one() {
     let rig = unique_rig("sunroof-file");
     let dir = temp_dir(&rig);
-    let text = std::fs::read_to_string(sunroof()).unwrap();
+    // To past the first corner: the phases before the roll and 400 mm of it, set in the files
+    // (not by `--set`, whose copy would carry the pieces inline): both daemons read the pieces
+    // file themselves.
+    let text = std::fs::read_to_string(sunroof()).unwrap().replace("z_end_mm = 1220\n", "z_end_mm = 400\n");
+    assert!(text.contains("z_end_mm = 400\n"));
     let start = text.find("pieces = [").unwrap();
     let end = start + text[start..].find("\n]\n").unwrap() + 3;
     let pieces = dir.join("pieces.txt");
     std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/sunroof_pieces.txt"), &pieces).unwrap();
-    let scenario = dir.join("sunroof_file.toml");
-    std::fs::write(&scenario, format!("{}pieces_file = \"pieces.txt\"\n{}", &text[..start], &text[end..])).unwrap();
-    // To past the first corner: the phases before the roll and 400 mm of it.
+    let (from_file_toml, inline_toml) = (dir.join("sunroof_file.toml"), dir.join("sunroof_inline.toml"));
+    std::fs::write(&from_file_toml, format!("{}pieces_file = \"pieces.txt\"\n{}", &text[..start], &text[end..])).unwrap();
+    std::fs::write(&inline_toml, &text).unwrap();
     let run = |path: &Path, out: &Path| {
         let o = Command::new(bin("rig"))
-            .args(["run", path.to_str().unwrap(), "--mode", "lockstep", "--set", "trajectory.z_end_mm=400"])
-            .args(["--out", out.to_str().unwrap()])
+            .args(["run", path.to_str().unwrap(), "--mode", "lockstep", "--out", out.to_str().unwrap()])
             .output()
             .unwrap();
         assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
         Recording::open_complete(out.join("run.mcap")).expect("complete recording")
     };
-    let (from_file, inline) = (run(&scenario, &dir.join("file")), run(&sunroof(), &dir.join("inline")));
+    let (from_file, inline) = (run(&from_file_toml, &dir.join("file")), run(&inline_toml, &dir.join("inline")));
     assert_eq!(physics_digest(&from_file), physics_digest(&inline));
     std::fs::remove_file(&pieces).unwrap();
     let stored = from_file.run_metadata().unwrap().scenario.unwrap().toml;
