@@ -137,7 +137,7 @@ def open_ports(rig):
                 .open_or_create())
     def event(svc):
         return (node.service_builder(name(svc)).event()
-                .max_notifiers(4).max_listeners(4).max_nodes(8).open_or_create())
+                .max_notifiers(4).max_listeners(4).max_nodes(8).event_id_max_value(0).open_or_create())
     p = dict(node=node)
     p["state"] = pubsub("joint_state", JointState).subscriber_builder().buffer_size(4).create()
     p["wrench"] = pubsub("wrench", Wrench).subscriber_builder().buffer_size(4).create()

@@ -76,7 +76,7 @@ def open_ports(rig):
                              .history_size(0).enable_safe_overflow(True).subscriber_max_borrowed_samples(2)
                              .open_or_create())
     event = lambda svc: (node.service_builder(name(svc)).event()
-                         .max_notifiers(4).max_listeners(4).max_nodes(8).open_or_create())
+                         .max_notifiers(4).max_listeners(4).max_nodes(8).event_id_max_value(0).open_or_create())
     return (node, pubsub("joint_state", JointState).subscriber_builder().buffer_size(4).create(),
             pubsub("wrench", Wrench).subscriber_builder().buffer_size(4).create(),
             pubsub("joint_torque", JointTorque).publisher_builder().create(),

@@ -20,3 +20,9 @@ pub const MAX_BORROWED_SAMPLES: usize = 2;
 /// Event services: notifiers and listeners per event.
 pub const MAX_NOTIFIERS: usize = 4;
 pub const MAX_LISTENERS: usize = 4;
+/// Largest event id of the event services: the contract notifies with id 0 only. iceoryx2 0.10
+/// keeps one counter per id in the listener's shared state and a drain (`try_wait`) swaps every
+/// one of them atomically: at iceoryx2's default (255) that is 256 swaps per drain, several
+/// drains a tick on each side. A peer that does not ask for a value opens the service as
+/// created; one that asks for more than the creator gave is refused by iceoryx2.
+pub const EVENT_ID_MAX: usize = 0;

@@ -136,6 +136,7 @@ fn event(
         .max_notifiers(qos::MAX_NOTIFIERS)
         .max_listeners(qos::MAX_LISTENERS)
         .max_nodes(qos::MAX_NODES)
+        .event_id_max_value(qos::EVENT_ID_MAX)
         .open_or_create()
         .map_err(|e| err(rig, svc, e))
 }
