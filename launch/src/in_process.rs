@@ -21,11 +21,6 @@ use scenarios::{Mode, Scenario};
 /// `controller_id` of the in-process controller (no process to name it after).
 const IN_PROCESS_CONTROLLER_ID: u64 = 1;
 
-/// zstd level of a sweep case's recording: level 1 takes about 13 % less CPU for the whole sweep
-/// than zstd's default 3, for files about 10 % larger (20 default-scenario cases, 2026-12-02);
-/// the writer competes with the cases for the cores there.
-pub const SWEEP_COMPRESSION_LEVEL: u32 = 1;
-
 /// What a case keeps: its recording (when the scenario records), its tick rows in memory for the
 /// rolling-phase numbers, or both. A sweep or study case that writes no file reads the same
 /// figures from its rows ([`recording_tools::strip_rows::CaseRows`]) as from the file.

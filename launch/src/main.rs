@@ -435,7 +435,7 @@ fn run_in_process(rig: &str, scenario: &Path, duration_s: Option<f64>, dir: &Pat
     let cache_dir = strip::cache::cache_dir();
     eprintln!("rig {rig}: plant tick + controller step in process (lockstep, no daemons), scenario {}", scenario.display());
     let recording = dir.join("run.mcap");
-    let tuning = recordings::RecorderTuning::default();
+    let tuning = recordings::RecorderTuning::for_mode(scenarios::Mode::Lockstep);
     let keep = in_process::Keep { recording: Some(&recording), rows: false, quiet: false };
     let (v, _) = in_process::run(rig, scenario, duration_s, keep, tuning, |s| plant_sim::physics::Physics::new(s, &cache_dir), signals)?;
     print!("{}", summary::run_summary(&v));
@@ -512,7 +512,7 @@ fn run_sweep(a: SweepArgs) -> anyhow::Result<i32> {
         sweep::run_cases(&planned, |n, (case_dir, path, label)| {
             let recording = case_dir.join("run.mcap");
             let rig = format!("sweep-case-{n:02}");
-            let tuning = recordings::RecorderTuning { compression_level: in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
+            let tuning = recordings::RecorderTuning::for_mode(scenarios::Mode::Lockstep);
             let all = a.recordings == study::file::Keep::All;
             let keep = in_process::Keep { recording: all.then_some(recording.as_path()), rows: true, quiet: true };
             let ran = in_process::run(&rig, path, a.launch.duration, keep, tuning.clone(), |s| strips.physics(s), signals);

@@ -172,7 +172,7 @@ pub fn open_recorder(
     physics: &Physics,
     live: Option<recordings::LiveConfig>,
 ) -> anyhow::Result<Recorder> {
-    open_recorder_with(path, about, scenario, physics, live, recordings::RecorderTuning::default())
+    open_recorder_with(path, about, scenario, physics, live, recordings::RecorderTuning::for_mode(about.mode))
 }
 
 /// Largest recorder queue in lockstep, records. Lockstep has no deadline: the loop waits for
@@ -181,7 +181,7 @@ pub fn open_recorder(
 /// 28 MB, 17-25 ms of the start on the idle VM, 2026-12-04).
 const LOCKSTEP_QUEUE_CAPACITY: usize = 1024;
 
-/// [`open_recorder`] with the writer's `tuning` (`rig sweep` compresses faster).
+/// [`open_recorder`] with the writer's `tuning`.
 pub fn open_recorder_with(
     path: &Path,
     about: &RecordingAbout,

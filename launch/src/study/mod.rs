@@ -155,7 +155,7 @@ pub fn run_case(
 ) -> anyhow::Result<Option<CaseRecord>> {
     use crate::in_process::Keep as Sink;
     use crate::supervise::{Ending, Outcome};
-    let tuning = recordings::RecorderTuning { compression_level: crate::in_process::SWEEP_COMPRESSION_LEVEL, ..Default::default() };
+    let tuning = recordings::RecorderTuning::for_mode(scenarios::Mode::Lockstep);
     let rig = format!("study-case-{n}");
     // Every case's recording is wanted: written in the one run.
     let first = Sink { recording: (keep == Keep::All).then_some(recording), rows: true, quiet: true };
