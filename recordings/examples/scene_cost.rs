@@ -1,5 +1,6 @@
 //! Writer-thread cost of the Foxglove channels for a default-sized strip (41 layers of 13 top
-//! nodes): building + protobuf-encoding one `/strip_scene` and one `/tf`, and zstd-compressing one
+//! nodes): building + protobuf-encoding one `/strip_scene` (through prost, and as the writer does it,
+//! `encode_scene_into`) and one `/tf`, and zstd-compressing one
 //! scene (level from `L`, default 3, the writer's). Numbers in recordings/README.md.
 //!
 //!     cargo run --release -p recordings --example scene_cost
@@ -44,6 +45,12 @@ fn main() {
         encode_into(&scene_update(&cfg, &head, &z, &p, &u, &[], i), &mut buf);
     }
     let scene = t.elapsed().as_secs_f64() / n as f64 * 1e6;
+    let mut scratch = SceneScratch::default();
+    let t = std::time::Instant::now();
+    for i in 0..n {
+        encode_scene_into(&cfg, &head, &z, &p, &u, &[], i, &mut scratch, &mut buf);
+    }
+    let direct = t.elapsed().as_secs_f64() / n as f64 * 1e6;
     let t = std::time::Instant::now();
     for i in 0..n {
         encode_into(&frame_transforms(&robot, &cfg, &[0.0, -1.3, 0.5, 0.0, 0.8, 0.0], i), &mut buf);
@@ -56,5 +63,8 @@ fn main() {
         let _ = c.compress(&buf).unwrap();
     }
     let z3 = t.elapsed().as_secs_f64() / n as f64 * 1e6;
-    println!("scene build+encode {scene:.1} us ({} B), tf {tf:.1} us, zstd-3 of one scene {z3:.1} us", buf.len());
+    println!(
+        "scene build+encode {scene:.1} us through prost, {direct:.1} us written directly ({} B), tf {tf:.1} us, zstd of one scene {z3:.1} us",
+        buf.len()
+    );
 }

@@ -287,17 +287,24 @@ pub fn scene_update(
     bond_peak_pa: &[f32],
     ns: u64,
 ) -> SceneUpdate {
+    scene_update_with(cfg, r, centreline_z_m, pressure_pa, top_uy_m, bond_peak_pa, ns, true)
+}
+
+/// [`scene_update`]; without `with_mesh` the strip entity has no triangle list (the one
+/// [`encode_scene_into`] writes itself).
+#[allow(clippy::too_many_arguments)]
+fn scene_update_with(
+    cfg: &SceneConfig,
+    r: &TickHead,
+    centreline_z_m: &[f32],
+    pressure_pa: &[f32],
+    top_uy_m: &[f32],
+    bond_peak_pa: &[f32],
+    ns: u64,
+    with_mesh: bool,
+) -> SceneUpdate {
     // Path coordinates to the drawn frame's: `task` itself, or `base` along a contour.
     let strip_frame = if cfg.path.is_some() { "base" } else { "task" };
-    let place = |x: f64, y: f64, z: f64| -> Point3 {
-        match &cfg.path {
-            None => Point3 { x, y, z },
-            Some(path) => {
-                let b = path.point_to_base(&nalgebra::Vector3::new(x, y, z));
-                Point3 { x: quantise(b.x, POSITION_STEP_M), y: quantise(b.y, POSITION_STEP_M), z: quantise(b.z, POSITION_STEP_M) }
-            }
-        }
-    };
     let ts = Some(timestamp(ns));
     let entity = |id: &str, frame: &str| SceneEntity {
         timestamp: ts,
@@ -325,47 +332,17 @@ pub fn scene_update(
     if let Some(g) = &cfg.strip {
         let s = &r.strip;
         let mut strip = entity("strip", strip_frame);
-        // A windowed strip: the layers within the tick's centre line (+ half an element for f32 z).
-        let top: &[[f64; 3]] = match (g.windowed, centreline_z_m.first(), centreline_z_m.last()) {
-            (true, Some(&lo), Some(&hi)) => {
-                let per = g.nodes_per_layer.max(1);
-                let layer_z = |k: usize| g.top_xyz_m[k * per][2];
-                let layers = g.top_xyz_m.len() / per;
-                let tol = 0.5 * (hi - lo) as f64 / centreline_z_m.len().max(2) as f64;
-                let k0 = (0..layers).find(|&k| layer_z(k) >= lo as f64 - tol).unwrap_or(layers);
-                let k1 = (k0..layers).find(|&k| layer_z(k) > hi as f64 + tol).unwrap_or(layers);
-                &g.top_xyz_m[k0 * per..k1 * per]
-            }
-            (true, _, _) => &[],
-            _ => &g.top_xyz_m,
-        };
-        let n = top.len();
-        let mut points = Vec::with_capacity(n);
-        let mut colors = Vec::with_capacity(n);
-        // The nodes come layer by layer in ascending z: one cursor per quantity.
-        let (mut at_u, mut at_p, mut at_s) = (1, 1, 1);
-        for p in top {
-            let mut uy = interp_from(centreline_z_m, top_uy_m, p[2], &mut at_u);
-            if g.windowed {
-                uy += substrate_height(&g.substrate_zy_m, p[2], &mut at_s);
-            }
-            let z = quantise(p[2], POSITION_STEP_M);
-            points.push(place(quantise(p[0], POSITION_STEP_M), quantise(p[1] + uy, POSITION_STEP_M), z));
-            // the colour of the vertex as drawn (at its rounded z)
-            let c = pressure_colour(interp_from(centreline_z_m, pressure_pa, z, &mut at_p));
-            colors.push(rgba(c.map(|v| quantise(v, COLOUR_STEP))));
+        if with_mesh {
+            let mesh = StripMesh::new(g, centreline_z_m);
+            let (mut points, mut colors) = (Vec::with_capacity(mesh.len()), Vec::with_capacity(mesh.len()));
+            mesh.vertices(cfg, g, centreline_z_m, pressure_pa, top_uy_m, |p, c| {
+                points.push(Point3 { x: p[0], y: p[1], z: p[2] });
+                colors.push(rgba(c));
+            });
+            let mut indices = Vec::with_capacity(mesh.n_indices());
+            mesh.indices(|i| indices.push(i));
+            strip.triangles.push(TriangleListPrimitive { pose: Some(at(0.0, 0.0, 0.0)), points, color: None, colors, indices });
         }
-        let per = g.nodes_per_layer.max(1);
-        let layers = n / per;
-        let mut indices = Vec::with_capacity(6 * layers.saturating_sub(1) * per.saturating_sub(1));
-        for k in 0..layers.saturating_sub(1) {
-            for j in 0..per - 1 {
-                let (a, b) = ((k * per + j) as u32, (k * per + j + 1) as u32);
-                let (c, e) = (a + per as u32, b + per as u32);
-                indices.extend_from_slice(&[a, b, e, a, e, c]);
-            }
-        }
-        strip.triangles.push(TriangleListPrimitive { pose: Some(at(0.0, 0.0, 0.0)), points, color: None, colors, indices });
         entities.push(strip);
 
         // The substrate's surface along the centre line: the bulge.
@@ -482,6 +459,191 @@ pub fn scene_update(
         entities.push(arrow);
     }
     SceneUpdate { deletions: Vec::new(), entities }
+}
+
+/// The strip's top surface as the scene draws it: the top nodes of the layers drawn (a windowed
+/// strip: those within the tick's centre line, + half an element for f32 z), one vertex each,
+/// two triangles per quad of neighbouring nodes.
+struct StripMesh<'a> {
+    top: &'a [[f64; 3]],
+    per: usize,
+}
+
+impl<'a> StripMesh<'a> {
+    fn new(g: &'a StripGeometry, centreline_z_m: &[f32]) -> Self {
+        let per = g.nodes_per_layer.max(1);
+        let top: &[[f64; 3]] = match (g.windowed, centreline_z_m.first(), centreline_z_m.last()) {
+            (true, Some(&lo), Some(&hi)) => {
+                let layer_z = |k: usize| g.top_xyz_m[k * per][2];
+                let layers = g.top_xyz_m.len() / per;
+                let tol = 0.5 * (hi - lo) as f64 / centreline_z_m.len().max(2) as f64;
+                let k0 = (0..layers).find(|&k| layer_z(k) >= lo as f64 - tol).unwrap_or(layers);
+                let k1 = (k0..layers).find(|&k| layer_z(k) > hi as f64 + tol).unwrap_or(layers);
+                &g.top_xyz_m[k0 * per..k1 * per]
+            }
+            (true, _, _) => &[],
+            _ => &g.top_xyz_m,
+        };
+        StripMesh { top, per }
+    }
+
+    fn len(&self) -> usize {
+        self.top.len()
+    }
+
+    fn layers(&self) -> usize {
+        self.top.len() / self.per
+    }
+
+    fn n_indices(&self) -> usize {
+        6 * self.layers().saturating_sub(1) * self.per.saturating_sub(1)
+    }
+
+    /// Each vertex in order, drawn position (in the strip's frame: `task`, or `base` along a
+    /// contour) and colour: displaced along task y by the top centre-line displacement at its z
+    /// (a windowed strip: raised by the substrate under it), coloured by the centre-line bottom
+    /// pressure at its rounded z; positions and colours quantised.
+    fn vertices(
+        &self,
+        cfg: &SceneConfig,
+        g: &StripGeometry,
+        centreline_z_m: &[f32],
+        pressure_pa: &[f32],
+        top_uy_m: &[f32],
+        mut vertex: impl FnMut([f64; 3], [f64; 4]),
+    ) {
+        // The nodes come layer by layer in ascending z: one cursor per quantity.
+        let (mut at_u, mut at_p, mut at_s) = (1, 1, 1);
+        for p in self.top {
+            let mut uy = interp_from(centreline_z_m, top_uy_m, p[2], &mut at_u);
+            if g.windowed {
+                uy += substrate_height(&g.substrate_zy_m, p[2], &mut at_s);
+            }
+            let z = quantise(p[2], POSITION_STEP_M);
+            let (x, y) = (quantise(p[0], POSITION_STEP_M), quantise(p[1] + uy, POSITION_STEP_M));
+            let drawn = match &cfg.path {
+                None => [x, y, z],
+                Some(path) => {
+                    let b = path.point_to_base(&nalgebra::Vector3::new(x, y, z));
+                    [quantise(b.x, POSITION_STEP_M), quantise(b.y, POSITION_STEP_M), quantise(b.z, POSITION_STEP_M)]
+                }
+            };
+            // the colour of the vertex as drawn (at its rounded z)
+            let c = pressure_colour(interp_from(centreline_z_m, pressure_pa, z, &mut at_p));
+            vertex(drawn, c.map(|v| quantise(v, COLOUR_STEP)));
+        }
+    }
+
+    /// The triangles' vertex indices: per quad (a, b) on one layer and (c, e) on the next,
+    /// (a, b, e) and (a, e, c).
+    fn indices(&self, mut index: impl FnMut(u32)) {
+        let per = self.per;
+        for k in 0..self.layers().saturating_sub(1) {
+            for j in 0..per - 1 {
+                let (a, b) = ((k * per + j) as u32, (k * per + j + 1) as u32);
+                let (c, e) = (a + per as u32, b + per as u32);
+                for i in [a, b, e, a, e, c] {
+                    index(i);
+                }
+            }
+        }
+    }
+}
+
+/// Protobuf wire format, the little the strip's mesh needs (what prost writes for these fields).
+mod wire {
+    /// Field `field` of wire type LEN (2).
+    pub fn len_tag(field: u32) -> u8 {
+        ((field << 3) | 2) as u8
+    }
+
+    pub fn varint(mut v: u64, out: &mut Vec<u8>) {
+        while v >= 0x80 {
+            out.push((v as u8) | 0x80);
+            v >>= 7;
+        }
+        out.push(v as u8);
+    }
+
+    /// A message of doubles (fields 1..): proto3 leaves a zero out (prost: `!= 0.0`).
+    pub fn doubles(field: u32, values: &[f64], out: &mut Vec<u8>) {
+        let n = values.iter().filter(|&&v| v != 0.0).count();
+        out.push(len_tag(field));
+        out.push((9 * n) as u8);
+        for (i, &v) in values.iter().enumerate() {
+            if v != 0.0 {
+                out.push((((i + 1) as u8) << 3) | 1);
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+}
+
+/// Reused buffers of [`encode_scene_into`].
+#[derive(Debug, Default)]
+pub struct SceneScratch {
+    mesh: Vec<u8>,
+    entity: Vec<u8>,
+}
+
+/// [`scene_update`] encoded into `buf` (cleared first), byte for byte what [`encode_into`] of it
+/// gives (tested), with the strip's triangle list written straight from the vertex walk: prost
+/// would build 2 × 533 point and colour messages for the default strip and size each of them
+/// three times over while encoding them (half the writer thread's scene time, 2026-12-06).
+#[allow(clippy::too_many_arguments)]
+pub fn encode_scene_into(
+    cfg: &SceneConfig,
+    r: &TickHead,
+    centreline_z_m: &[f32],
+    pressure_pa: &[f32],
+    top_uy_m: &[f32],
+    bond_peak_pa: &[f32],
+    ns: u64,
+    scratch: &mut SceneScratch,
+    buf: &mut Vec<u8>,
+) {
+    use prost::Message;
+    let msg = scene_update_with(cfg, r, centreline_z_m, pressure_pa, top_uy_m, bond_peak_pa, ns, false);
+    buf.clear();
+    // SceneUpdate: deletions (field 1) are empty; each entity a field 2.
+    for e in &msg.entities {
+        let strip = match &cfg.strip {
+            Some(g) if e.id == "strip" => g,
+            _ => {
+                prost::encoding::message::encode(2, e, buf);
+                continue;
+            }
+        };
+        // TriangleListPrimitive: pose (1), points (2), colors (4), indices (5, packed fixed32).
+        let mesh = StripMesh::new(strip, centreline_z_m);
+        let tri = &mut scratch.mesh;
+        tri.clear();
+        prost::encoding::message::encode(1, &at(0.0, 0.0, 0.0), tri);
+        let mut colours = std::mem::take(&mut scratch.entity);
+        colours.clear();
+        mesh.vertices(cfg, strip, centreline_z_m, pressure_pa, top_uy_m, |p, c| {
+            wire::doubles(2, &p, tri);
+            wire::doubles(4, &c, &mut colours);
+        });
+        tri.extend_from_slice(&colours);
+        if mesh.n_indices() > 0 {
+            tri.push(wire::len_tag(5));
+            wire::varint(4 * mesh.n_indices() as u64, tri);
+            mesh.indices(|i| tri.extend_from_slice(&i.to_le_bytes()));
+        }
+        // The entity: its fields below 12 as prost writes them, then the triangle list (12),
+        // its only field from 12 on.
+        colours.clear();
+        e.encode_raw(&mut colours);
+        let entity_len = colours.len() + 1 + prost::length_delimiter_len(tri.len()) + tri.len();
+        buf.push(wire::len_tag(2));
+        wire::varint(entity_len as u64, buf);
+        buf.extend_from_slice(&colours);
+        buf.push(wire::len_tag(12));
+        wire::varint(tri.len() as u64, buf);
+        buf.extend_from_slice(tri);
+        scratch.entity = colours;
+    }
 }
 
 /// The Log level of an event kind: faults and refusals are errors, safe stops, reflexes and
@@ -609,6 +771,60 @@ mod tests {
         assert_eq!([c.r, c.g, c.b], [1.0, 0.9 * 0.5, 0.1 * 0.5].map(|v| quantise(v, COLOUR_STEP)), "150 kPa under the wheel");
         let bulge = msg.entities.iter().find(|e| e.id == "bulge").unwrap();
         assert_eq!(bulge.lines[0].points.len(), layers, "the substrate along the whole strip");
+    }
+
+    /// The strip's triangle list written straight (`encode_scene_into`) is prost's encoding of
+    /// [`scene_update`] byte for byte: a straight strip with zeros among its coordinates and
+    /// colours (proto3 leaves zeros out), a windowed one, the same with an empty centre line (no
+    /// mesh), a strip along the sunroof contour, and a scene without a strip.
+    #[test]
+    fn the_direct_encoding_is_prosts_byte_for_byte() {
+        let straight = |windowed: bool| SceneConfig {
+            rate_hz: 100.0,
+            tool: Tool::default(),
+            task_in_base: Isometry3::identity(),
+            strip: Some(StripGeometry {
+                top_xyz_m: (0..41)
+                    .flat_map(|k| (0..13).map(move |j| [(j as f64 - 6.0) * 1e-3, if j % 4 == 0 { 0.0 } else { 0.004 }, k as f64 * 1e-3]))
+                    .collect(),
+                nodes_per_layer: 13,
+                substrate_zy_m: (0..=40).map(|i| [i as f64 * 1e-3, if i > 20 { 2e-4 } else { 0.0 }]).collect(),
+                length_m: 0.04,
+                half_width_m: 0.004,
+                windowed,
+            }),
+            path: None,
+            band_base: Vec::new(),
+        };
+        let sunroof =
+            scenarios::Scenario::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/sunroof.toml")).unwrap();
+        let along = straight(true).along(Some(scenarios::path::StripPath::from_scenario(&sunroof)));
+        let bare = SceneConfig { strip: None, ..straight(false) };
+        let z: Vec<f32> = (0..21).map(|i| (0.01 + i as f64 * 1e-3) as f32).collect();
+        let p: Vec<f32> = (0..21).map(|i| [0.0, -3e3, 60e3, 100e3, 170e3, 250e3][i % 6]).collect();
+        let u: Vec<f32> = (0..21).map(|i| if i % 3 == 0 { 0.0 } else { -1.5e-4 * i as f32 }).collect();
+        let peak: Vec<f32> = (0..400).map(|i| (i * 500) as f32).collect();
+        let mut rec = crate::TickRecord::default();
+        rec.strip.contact_force_n = -10.0;
+        rec.strip.wheel_z_m = 0.02;
+        let head = TickHead::of(&rec);
+        let (mut scratch, mut direct, mut reference) = (SceneScratch::default(), Vec::new(), Vec::new());
+        let cases: [(&str, &SceneConfig, &[f32]); 5] = [
+            ("straight", &straight(false), &z),
+            ("windowed", &straight(true), &z),
+            ("windowed, empty", &straight(true), &[]),
+            ("along the sunroof", &along, &z),
+            ("no strip", &bare, &z),
+        ];
+        for (name, cfg, z) in cases {
+            let (p, u) = (&p[..z.len()], &u[..z.len()]);
+            for ns in [0, 1_765_000_000_123_456_789] {
+                encode_into(&scene_update(cfg, &head, z, p, u, &peak, ns), &mut reference);
+                encode_scene_into(cfg, &head, z, p, u, &peak, ns, &mut scratch, &mut direct);
+                assert!(reference.len() > 100, "{name}: {} bytes", reference.len());
+                assert!(direct == reference, "{name}: {} bytes direct against {} from prost", direct.len(), reference.len());
+            }
+        }
     }
 
     #[test]

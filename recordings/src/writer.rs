@@ -390,6 +390,7 @@ impl Recorder {
                 }
                 _ => Vec::new(),
             },
+            scene_scratch: Default::default(),
             fox,
             robot_description,
             scene_every: cfg.scene.as_ref().map_or(1, |s| s.every_ticks(cfg.period_s)),
@@ -603,6 +604,8 @@ struct WriterThread {
     /// A contour's scene: the peak centre-line pressure per millimetre so far (every tick's, not
     /// just the scene's ticks); empty otherwise.
     bond_peak: Vec<f32>,
+    /// Reused buffers of the scene's encoding.
+    scene_scratch: crate::scene::SceneScratch,
     /// Ids of the Foxglove channels.
     fox: FoxgloveChannels,
     /// The `/robot_description` message (CDR), written once at the start of the file and offered
@@ -837,6 +840,7 @@ impl WriterThread {
             pressure,
             top_uy,
             bond_peak,
+            scene_scratch,
             robot_description,
             ..
         } = self;
@@ -861,8 +865,7 @@ impl WriterThread {
             put(ch, buf)?;
         }
         if let Some(ch) = fox.scene {
-            let msg = crate::scene::scene_update(cfg, r, centreline_z, pressure, top_uy, bond_peak, log_time);
-            crate::scene::encode_into(&msg, buf);
+            crate::scene::encode_scene_into(cfg, r, centreline_z, pressure, top_uy, bond_peak, log_time, scene_scratch, buf);
             put(ch, buf)?;
         }
         if let (Some(ch), true) = (fox.under_wheel, !pressure.is_empty()) {
