@@ -28,9 +28,15 @@ fn lockstep_with_a_second_controller_never_loses_wake_ups_in_a_row() {
     let (mut ticks, mut foreign, mut lost, mut runs_with_lost) = (0, 0, 0, 0);
     for run in 0..n {
         let t = TestRig::new(&format!("notify-{run}"), "lockstep");
-        let mut plant = t.plant(1.0);
+        // Both controllers subscribed before the plant starts: a lockstep plant runs its 1000
+        // ticks in a few tens of ms once one controller answers, and a controller that subscribes
+        // after the last state (history 0) would wait for one for ever.
         let mut a = t.controller("a", "hold-controller", &[]);
         let mut b = t.controller("b", "hold-controller", &["--offset-nm", "1"]);
+        for c in [&a, &b] {
+            wait_for_log(c, "hold-controller: ports open", Duration::from_secs(10));
+        }
+        let mut plant = t.plant(1.0);
         let ps = plant.expect_exit(Duration::from_secs(120));
         assert!(ps.success(), "run {run}: plant failed ({ps}):\n{}", plant.stderr());
         for c in [&mut a, &mut b] {

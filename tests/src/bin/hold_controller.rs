@@ -188,6 +188,8 @@ fn run(a: &Args) -> anyhow::Result<()> {
     }
     rig_process::ports::clean_dead_nodes();
     let ports = ControllerPorts::open(a.open_rig.as_deref().unwrap_or(&a.rig), "hold-controller")?;
+    // (a test that needs this controller subscribed before the plant starts waits for this line)
+    eprintln!("hold-controller: ports open");
     let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
     let id = ((std::process::id() as u64) << 32) | nanos as u64;
     let mut hold: Option<(Vec6, u64)> = None;
