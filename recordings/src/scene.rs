@@ -514,6 +514,9 @@ impl<'a> StripMesh<'a> {
     ) {
         // The nodes come layer by layer in ascending z: one cursor per quantity.
         let (mut at_u, mut at_p, mut at_s) = (1, 1, 1);
+        // Along a contour a layer's vertices share their z, so its moving frame is found once a
+        // layer (`StripPath::point_to_base` is that frame applied to (x, y, 0)).
+        let mut layer_frame: Option<(f64, scenarios::geometry::TaskFrame)> = None;
         for p in self.top {
             let mut uy = interp_from(centreline_z_m, top_uy_m, p[2], &mut at_u);
             if g.windowed {
@@ -524,7 +527,16 @@ impl<'a> StripMesh<'a> {
             let drawn = match &cfg.path {
                 None => [x, y, z],
                 Some(path) => {
-                    let b = path.point_to_base(&nalgebra::Vector3::new(x, y, z));
+                    let b = match path {
+                        scenarios::path::StripPath::Contour { .. } => {
+                            let frame = match layer_frame {
+                                Some((fz, f)) if fz == z => f,
+                                _ => layer_frame.insert((z, path.frame_at(z))).1,
+                            };
+                            frame.point_to_base(&nalgebra::Vector3::new(x, y, 0.0))
+                        }
+                        scenarios::path::StripPath::Straight(_) => path.point_to_base(&nalgebra::Vector3::new(x, y, z)),
+                    };
                     [quantise(b.x, POSITION_STEP_M), quantise(b.y, POSITION_STEP_M), quantise(b.z, POSITION_STEP_M)]
                 }
             };
