@@ -272,37 +272,65 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     let signals = crate::signals::Signals::install();
 
     let t_setup = std::time::Instant::now();
-    let physics = Physics::new(&scenario, &opts.cache_dir)?;
-    let t_physics = t_setup.elapsed();
-    let ports = rig_process::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
-    // Liveness of the controllers' nodes, on its own thread (started before the loop's real-time
-    // set-up, so it keeps the normal scheduling policy).
-    let watch = rig_process::liveness::PeerWatch::spawn(&opts.rig, "plant-sim-watch", rig_process::liveness::Watched::Controllers)?;
-    let mut arbiter = crate::arbiter::Arbiter::new(l.takeover_after_misses);
-
-    // Lockstep: the recorder's writer thread inherits this thread's affinity when it is spawned;
+    // Lockstep: the recorder's writer thread inherits the affinity of the thread that spawns it;
     // keep it off the CPU the loop and the controller are pinned to (ZSTD compression costs
     // ~10 µs per tick, which would otherwise come out of the lockstep tick whenever the scheduler
-    // places the writer there).
+    // places the writer there). Set here, before the set-up thread below inherits it.
     // (The CPU is chosen before: lockstep_cpu counts this thread's allowed CPUs.)
     let lockstep_cpu = rt::lockstep_cpu();
-    if mode == Mode::Lockstep && !rt::keep_thread_off_cpu(lockstep_cpu) {
-        tracing::warn!("could not keep the recorder off the lockstep CPU {lockstep_cpu}");
-    }
     anyhow::ensure!(
         opts.live.is_none() || scenario.recording.enabled,
         "--live: the live view is fed by the recorder, and {} disables the recording (recording.enabled = false)",
         opts.scenario_path.display()
     );
     let recording = scenario.recording.enabled.then(|| opts.out.clone().unwrap_or_else(|| default_recording_path(&opts.rig)));
-    let t_ports = t_setup.elapsed();
-    let mut recorder = match &recording {
-        Some(path) => {
-            let about = RecordingAbout { rig: &opts.rig, mode, scenario_path: &opts.scenario_path, scenario_text, transport: None };
-            Some(open_recorder(path, &about, &scenario, &physics, opts.live.clone())?)
+    // The strip model and contact tables, then the recorder (whose scene needs the model), on a
+    // set-up thread while this one opens the iceoryx2 ports and the liveness watch: neither
+    // needs the other, and each took about half of the plant's start-up (README, "Lockstep
+    // start-up"). Without a thread, one after the other.
+    let physics_then_recorder = || -> anyhow::Result<(Physics, Option<Recorder>, std::time::Duration, std::time::Duration)> {
+        let t0 = std::time::Instant::now();
+        if mode == Mode::Lockstep && !rt::keep_thread_off_cpu(lockstep_cpu) {
+            tracing::warn!("could not keep the recorder off the lockstep CPU {lockstep_cpu}");
         }
-        None => None,
+        let physics = Physics::new(&scenario, &opts.cache_dir)?;
+        let t_physics = t0.elapsed();
+        let recorder = match &recording {
+            Some(path) => {
+                let about = RecordingAbout {
+                    rig: &opts.rig,
+                    mode,
+                    scenario_path: &opts.scenario_path,
+                    scenario_text: scenario_text.clone(),
+                    transport: None,
+                };
+                Some(open_recorder(path, &about, &scenario, &physics, opts.live.clone())?)
+            }
+            None => None,
+        };
+        Ok((physics, recorder, t_physics, t0.elapsed() - t_physics))
     };
+    let ports_and_watch = || -> anyhow::Result<(rig_process::ports::PlantPorts, rig_process::liveness::PeerWatch, std::time::Duration)> {
+        let t0 = std::time::Instant::now();
+        let ports = rig_process::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
+        // Liveness of the controllers' nodes, on its own thread (started before the loop's
+        // real-time set-up, so it keeps the normal scheduling policy).
+        let watch = rig_process::liveness::PeerWatch::spawn(&opts.rig, "plant-sim-watch", rig_process::liveness::Watched::Controllers)?;
+        Ok((ports, watch, t0.elapsed()))
+    };
+    let (set_up, opened) = std::thread::scope(|scope| {
+        match std::thread::Builder::new().name("plant-setup".into()).spawn_scoped(scope, || physics_then_recorder()) {
+            Ok(helper) => {
+                let opened = ports_and_watch();
+                (helper.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the plant's set-up thread panicked"))), opened)
+            }
+            Err(_) => (physics_then_recorder(), ports_and_watch()),
+        }
+    });
+    // The model's refusal first, as when the two ran one after the other.
+    let (physics, mut recorder, t_physics, t_recorder) = set_up?;
+    let (ports, watch, t_ports) = opened?;
+    let mut arbiter = crate::arbiter::Arbiter::new(l.takeover_after_misses);
 
     // Real-time set-up after the recorder's writer thread exists (it keeps the normal policy).
     // Lockstep keeps the normal policy: nothing there is time-critical, and a SCHED_FIFO waker
@@ -337,7 +365,8 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
         );
     }
     // The start-up's parts (README, "Lockstep start-up"): scenario and host checks, strip model
-    // and contact tables, ports and liveness watch, recorder.
+    // and contact tables, then the recorder (set-up thread), beside ports and liveness watch
+    // (this thread), and the whole set-up to here.
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     tracing::info!(
         rig = %opts.rig,
@@ -346,8 +375,9 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
         recording = ?recording,
         host_ms = ms(t_setup - t_run),
         physics_ms = ms(t_physics),
-        ports_ms = ms(t_ports - t_physics),
-        recorder_ms = ms(t_setup.elapsed() - t_ports),
+        ports_ms = ms(t_ports),
+        recorder_ms = ms(t_recorder),
+        setup_ms = ms(t_setup.elapsed()),
         "plant running"
     );
     if let Some(r) = recorder.as_mut() {
