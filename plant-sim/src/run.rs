@@ -319,7 +319,7 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
         Ok((ports, watch, t0.elapsed()))
     };
     let (set_up, opened) = std::thread::scope(|scope| {
-        match std::thread::Builder::new().name("plant-setup".into()).spawn_scoped(scope, || physics_then_recorder()) {
+        match std::thread::Builder::new().name("plant-setup".into()).spawn_scoped(scope, physics_then_recorder) {
             Ok(helper) => {
                 let opened = ports_and_watch();
                 (helper.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the plant's set-up thread panicked"))), opened)
