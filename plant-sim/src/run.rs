@@ -273,10 +273,10 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
 
     let t_setup = std::time::Instant::now();
     // Lockstep: the recorder's writer thread inherits the affinity of the thread that spawns it;
-    // keep it off the CPU the loop and the controller are pinned to (ZSTD compression costs
-    // ~10 µs per tick, which would otherwise come out of the lockstep tick whenever the scheduler
-    // places the writer there). Set here, before the set-up thread below inherits it.
-    // (The CPU is chosen before: lockstep_cpu counts this thread's allowed CPUs.)
+    // the set-up thread below keeps itself off the CPU the loop and the controller are pinned to
+    // before it starts the recorder (ZSTD compression costs ~10 µs per tick, which would
+    // otherwise come out of the lockstep tick whenever the scheduler places the writer there).
+    // (The CPU is chosen here: lockstep_cpu counts this thread's allowed CPUs.)
     let lockstep_cpu = rt::lockstep_cpu();
     anyhow::ensure!(
         opts.live.is_none() || scenario.recording.enabled,
@@ -290,11 +290,15 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     // start-up"). Without a thread, one after the other.
     let physics_then_recorder = || -> anyhow::Result<(Physics, Option<Recorder>, std::time::Duration, std::time::Duration)> {
         let t0 = std::time::Instant::now();
+        // With every CPU, as on the main thread: building a strip model factors in faer's
+        // global parallelism, whose pool takes its size from the affinity of the thread that
+        // first uses it, and a pool of another size gives other bits (an EGM digest moved when
+        // this ran after the line below).
+        let physics = Physics::new(&scenario, &opts.cache_dir)?;
+        let t_physics = t0.elapsed();
         if mode == Mode::Lockstep && !rt::keep_thread_off_cpu(lockstep_cpu) {
             tracing::warn!("could not keep the recorder off the lockstep CPU {lockstep_cpu}");
         }
-        let physics = Physics::new(&scenario, &opts.cache_dir)?;
-        let t_physics = t0.elapsed();
         let recorder = match &recording {
             Some(path) => {
                 let about = RecordingAbout {
