@@ -37,18 +37,19 @@ fn main() {
     let z: Vec<f32> = (0..41).map(|k| k as f32 * 1e-3).collect();
     let p: Vec<f32> = (0..41).map(|k| 1e3 * k as f32 * 5.0).collect();
     let u: Vec<f32> = vec![-1e-4; 41];
+    let tick = |ns| SceneTick { head: &head, centreline_z_m: &z, pressure_pa: &p, top_uy_m: &u, bond_peak_pa: &[], ns };
     let robot = robot::Robot::irb2400_with_tool(cfg.tool);
     let mut buf = Vec::new();
     let n = 2000;
     let t = std::time::Instant::now();
     for i in 0..n {
-        encode_into(&scene_update(&cfg, &head, &z, &p, &u, &[], i), &mut buf);
+        encode_into(&scene_update(&cfg, &tick(i)), &mut buf);
     }
     let scene = t.elapsed().as_secs_f64() / n as f64 * 1e6;
     let mut scratch = SceneScratch::default();
     let t = std::time::Instant::now();
     for i in 0..n {
-        encode_scene_into(&cfg, &head, &z, &p, &u, &[], i, &mut scratch, &mut buf);
+        encode_scene_into(&cfg, &tick(i), &mut scratch, &mut buf);
     }
     let direct = t.elapsed().as_secs_f64() / n as f64 * 1e6;
     let t = std::time::Instant::now();
@@ -57,7 +58,7 @@ fn main() {
     }
     let tf = t.elapsed().as_secs_f64() / n as f64 * 1e6;
     let mut c = zstd::bulk::Compressor::new(std::env::var("L").map_or(3, |v| v.parse().unwrap())).unwrap();
-    encode_into(&scene_update(&cfg, &head, &z, &p, &u, &[], 1), &mut buf);
+    encode_into(&scene_update(&cfg, &tick(1)), &mut buf);
     let t = std::time::Instant::now();
     for _ in 0..n {
         let _ = c.compress(&buf).unwrap();

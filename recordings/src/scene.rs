@@ -278,31 +278,26 @@ pub fn frame_transforms(robot: &Robot, cfg: &SceneConfig, q: &[f64; 6], ns: u64)
 /// Along a contour (`cfg.path`): the strip, the substrate and the force in `base`, the substrate
 /// line coloured by `bond_peak_pa` (the peak centre-line pressure per [`SCENE_BOND_STEP_M`] so
 /// far, [`raise_bond_peak`]); the colour scale stays in `task`, 0.2 m long.
-pub fn scene_update(
-    cfg: &SceneConfig,
-    r: &TickHead,
-    centreline_z_m: &[f32],
-    pressure_pa: &[f32],
-    top_uy_m: &[f32],
-    bond_peak_pa: &[f32],
-    ns: u64,
-) -> SceneUpdate {
-    scene_update_with(cfg, r, centreline_z_m, pressure_pa, top_uy_m, bond_peak_pa, ns, true)
+pub fn scene_update(cfg: &SceneConfig, t: &SceneTick) -> SceneUpdate {
+    scene_update_with(cfg, t, true)
+}
+
+/// One tick's inputs of the scene: its head, the centre line's node z with the tick's pressure
+/// and top displacement at them, the contour's bond map so far, and the message's time (Unix ns).
+#[derive(Debug, Clone, Copy)]
+pub struct SceneTick<'a> {
+    pub head: &'a TickHead,
+    pub centreline_z_m: &'a [f32],
+    pub pressure_pa: &'a [f32],
+    pub top_uy_m: &'a [f32],
+    pub bond_peak_pa: &'a [f32],
+    pub ns: u64,
 }
 
 /// [`scene_update`]; without `with_mesh` the strip entity has no triangle list (the one
 /// [`encode_scene_into`] writes itself).
-#[allow(clippy::too_many_arguments)]
-fn scene_update_with(
-    cfg: &SceneConfig,
-    r: &TickHead,
-    centreline_z_m: &[f32],
-    pressure_pa: &[f32],
-    top_uy_m: &[f32],
-    bond_peak_pa: &[f32],
-    ns: u64,
-    with_mesh: bool,
-) -> SceneUpdate {
+fn scene_update_with(cfg: &SceneConfig, t: &SceneTick, with_mesh: bool) -> SceneUpdate {
+    let SceneTick { head: r, centreline_z_m, pressure_pa, top_uy_m, bond_peak_pa, ns } = *t;
     // Path coordinates to the drawn frame's: `task` itself, or `base` along a contour.
     let strip_frame = if cfg.path.is_some() { "base" } else { "task" };
     let ts = Some(timestamp(ns));
@@ -602,20 +597,10 @@ pub struct SceneScratch {
 /// gives (tested), with the strip's triangle list written straight from the vertex walk: prost
 /// would build 2 × 533 point and colour messages for the default strip and size each of them
 /// three times over while encoding them (half the writer thread's scene time, 2026-12-06).
-#[allow(clippy::too_many_arguments)]
-pub fn encode_scene_into(
-    cfg: &SceneConfig,
-    r: &TickHead,
-    centreline_z_m: &[f32],
-    pressure_pa: &[f32],
-    top_uy_m: &[f32],
-    bond_peak_pa: &[f32],
-    ns: u64,
-    scratch: &mut SceneScratch,
-    buf: &mut Vec<u8>,
-) {
+pub fn encode_scene_into(cfg: &SceneConfig, t: &SceneTick, scratch: &mut SceneScratch, buf: &mut Vec<u8>) {
     use prost::Message;
-    let msg = scene_update_with(cfg, r, centreline_z_m, pressure_pa, top_uy_m, bond_peak_pa, ns, false);
+    let SceneTick { centreline_z_m, pressure_pa, top_uy_m, .. } = *t;
+    let msg = scene_update_with(cfg, t, false);
     buf.clear();
     // SceneUpdate: deletions (field 1) are empty; each entity a field 2.
     for e in &msg.entities {
@@ -762,7 +747,8 @@ mod tests {
         let z: Vec<f32> = (0..61).map(|i| (0.07 + i as f64 * el) as f32).collect();
         let p: Vec<f32> = (0..61).map(|i| if i == 30 { 150e3 } else { 50e3 }).collect();
         let u = vec![0.0f32; 61];
-        let msg = scene_update(&cfg, &head, &z, &p, &u, &[], 0);
+        let msg =
+            scene_update(&cfg, &SceneTick { head: &head, centreline_z_m: &z, pressure_pa: &p, top_uy_m: &u, bond_peak_pa: &[], ns: 0 });
         let strip = msg.entities.iter().find(|e| e.id == "strip").unwrap();
         let tri = &strip.triangles[0];
         assert_eq!(tri.points.len(), 61 * per, "the 61 layers around the wheel");
@@ -831,8 +817,9 @@ mod tests {
         for (name, cfg, z) in cases {
             let (p, u) = (&p[..z.len()], &u[..z.len()]);
             for ns in [0, 1_765_000_000_123_456_789] {
-                encode_into(&scene_update(cfg, &head, z, p, u, &peak, ns), &mut reference);
-                encode_scene_into(cfg, &head, z, p, u, &peak, ns, &mut scratch, &mut direct);
+                let t = SceneTick { head: &head, centreline_z_m: z, pressure_pa: p, top_uy_m: u, bond_peak_pa: &peak, ns };
+                encode_into(&scene_update(cfg, &t), &mut reference);
+                encode_scene_into(cfg, &t, &mut scratch, &mut direct);
                 assert!(reference.len() > 100, "{name}: {} bytes", reference.len());
                 assert!(direct == reference, "{name}: {} bytes direct against {} from prost", direct.len(), reference.len());
             }

@@ -865,7 +865,15 @@ impl WriterThread {
             put(ch, buf)?;
         }
         if let Some(ch) = fox.scene {
-            crate::scene::encode_scene_into(cfg, r, centreline_z, pressure, top_uy, bond_peak, log_time, scene_scratch, buf);
+            let t = crate::scene::SceneTick {
+                head: r,
+                centreline_z_m: centreline_z,
+                pressure_pa: pressure,
+                top_uy_m: top_uy,
+                bond_peak_pa: bond_peak,
+                ns: log_time,
+            };
+            crate::scene::encode_scene_into(cfg, &t, scene_scratch, buf);
             put(ch, buf)?;
         }
         if let (Some(ch), true) = (fox.under_wheel, !pressure.is_empty()) {
