@@ -60,6 +60,28 @@ fn every_tick_on_every_channel_reads_back_exactly() {
     assert_eq!(rec.events[1].text, "synthetic safe stop");
 }
 
+/// The lockstep level is one of zstd's negative (fast) ones, which reaches zstd through mcap's
+/// u32 parameter: the file reads back whole, and the levels differ in size as zstd's do (a fast
+/// level compresses less; had the -5 arrived as 2^32 - 5, zstd would have clamped it to its
+/// strongest level and the file would be the smallest).
+#[test]
+fn a_negative_zstd_level_reaches_zstd_and_reads_back() {
+    const { assert!(RecorderTuning::LOCKSTEP_COMPRESSION_LEVEL < 0) };
+    let run = SyntheticRun { ticks: 3000, ..Default::default() };
+    let bytes = |level: i32| {
+        let path = tmp(&format!("level{level}.mcap"));
+        let summary =
+            run.record_with(small_chunks(&path, &run), RecorderTuning { compression_level: level, ..Default::default() }).unwrap();
+        let rec = Recording::open_complete(&path).unwrap();
+        assert_eq!(rec.check_continuity().unwrap(), 0..=run.ticks - 1, "level {level}");
+        assert_eq!(rec.joint_state[1234], run.tick(1234).state, "level {level}");
+        summary.bytes
+    };
+    let (fast5, lockstep, one, nineteen) = (bytes(-5), bytes(RecorderTuning::LOCKSTEP_COMPRESSION_LEVEL), bytes(1), bytes(19));
+    assert!(fast5 > one && nineteen < one, "-5: {fast5} B, 1: {one} B, 19: {nineteen} B");
+    assert!(lockstep > nineteen, "lockstep level: {lockstep} B, 19: {nineteen} B");
+}
+
 #[test]
 fn a_cut_file_gives_its_complete_chunks_and_a_clear_error_when_strict() {
     let run = SyntheticRun { ticks: 2000, ..Default::default() };

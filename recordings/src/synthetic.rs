@@ -179,7 +179,16 @@ impl SyntheticRun {
 
     /// Writes the whole run through a [`crate::Recorder`] (events at their ticks).
     pub fn record(&self, cfg: crate::RecorderConfig) -> Result<crate::RecordingSummary, crate::RecorderError> {
-        let mut rec = crate::Recorder::start(cfg)?;
+        self.record_with(cfg, crate::RecorderTuning::default())
+    }
+
+    /// [`SyntheticRun::record`] with the writer's knobs given.
+    pub fn record_with(
+        &self,
+        cfg: crate::RecorderConfig,
+        tuning: crate::RecorderTuning,
+    ) -> Result<crate::RecordingSummary, crate::RecorderError> {
+        let mut rec = crate::Recorder::start_with(cfg, tuning)?;
         let events = self.events();
         for k in 0..self.ticks {
             for e in events.iter().filter(|e| e.tick == k) {
