@@ -68,7 +68,7 @@ pub struct DaemonSummary {
 /// Timer slack 1 ns, SCHED_FIFO (priority > 0) and mlockall when permitted
 /// ([`rig_process::rt::setup_thread`], the plant's set-up); each outcome logged once.
 fn setup_realtime(priority: i32) {
-    let r = rig_process::rt::setup_thread((priority > 0).then_some(priority));
+    let r = rig_process::rt::setup_thread((priority > 0).then_some(priority), true);
     if !r.timer_slack_1ns {
         tracing::warn!("could not lower the timer slack to 1 ns");
     }

@@ -118,7 +118,7 @@ impl Probe {
 
 fn run(cpu: usize, period_ns: u64, latest: &Latest, stop: &AtomicBool) -> CpuReport {
     let pinned = rt::pin_thread_to_cpu(cpu);
-    let sched_fifo = rt::setup_thread(Some(PROBE_PRIORITY)).sched_fifo;
+    let sched_fifo = rt::setup_thread(Some(PROBE_PRIORITY), true).sched_fifo;
     let mut latency = Histogram::for_latency();
     let mut ring = vec![(0u64, 0u64); STALL_RING];
     let mut stalls = 0u64;

@@ -340,7 +340,10 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     // Lockstep keeps the normal policy: nothing there is time-critical, and a SCHED_FIFO waker
     // hands over to the controller across CPUs (waking a halted vCPU) instead of on its own CPU,
     // which measured 50 µs instead of 15 µs per round trip on a 2-vCPU VM.
-    let rt_setup = rt::setup_thread((mode == Mode::Realtime).then_some(80));
+    // Memory is locked in real time only: a lockstep run has no deadline a page fault could
+    // miss, and locking populates every mapping at once (each thread's whole stack among them),
+    // about 5 ms of the lockstep start-up's critical path in the kernel (perf, 2026-12-06).
+    let rt_setup = rt::setup_thread((mode == Mode::Realtime).then_some(80), mode == Mode::Realtime);
     if mode == Mode::Lockstep {
         let cpu = lockstep_cpu;
         if !rt::pin_thread_to_cpu(cpu) {
@@ -361,7 +364,7 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
             Err(e) => tracing::warn!("could not hold /dev/cpu_dma_latency at 0 µs ({e}): idle CPUs may halt, wake-ups cost more"),
         }
     }
-    if (mode == Mode::Realtime && !rt_setup.sched_fifo) || !rt_setup.mlockall {
+    if mode == Mode::Realtime && (!rt_setup.sched_fifo || !rt_setup.mlockall) {
         tracing::warn!(
             "real-time set-up incomplete: SCHED_FIFO {}, mlockall {} (needs CAP_SYS_NICE/rtprio and memlock limits); running best-effort",
             if rt_setup.sched_fifo { "on" } else { "refused" },

@@ -57,6 +57,7 @@ pub struct PlantSummary {
     pub speed_factor: f64,
     pub stopped_by_signal: bool,
     pub sched_fifo: bool,
+    /// Memory locked (real time only: a lockstep run locks none).
     pub mlockall: bool,
     pub round_trip: Distribution,
     /// |period - T|.

@@ -14,10 +14,10 @@ pub struct RtSetup {
 }
 
 /// Prepare the calling thread: timer slack 1 ns (so absolute sleeps wake on time instead of up to
-/// 50 µs late), SCHED_FIFO at `priority` (None = keep the normal policy) and locked memory when
-/// the process may (CAP_SYS_NICE / rtprio limits, CAP_IPC_LOCK / memlock limits). Failures are
-/// reported, not fatal.
-pub fn setup_thread(priority: Option<i32>) -> RtSetup {
+/// 50 µs late), SCHED_FIFO at `priority` (None = keep the normal policy) and, with
+/// `lock_memory`, locked memory when the process may (CAP_SYS_NICE / rtprio limits, CAP_IPC_LOCK /
+/// memlock limits). Failures are reported, not fatal.
+pub fn setup_thread(priority: Option<i32>, lock_memory: bool) -> RtSetup {
     let mut r = RtSetup::default();
     // SAFETY: plain syscalls on the calling thread/process with valid arguments.
     unsafe {
@@ -27,7 +27,7 @@ pub fn setup_thread(priority: Option<i32>) -> RtSetup {
             r.sched_fifo_errno = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param);
             r.sched_fifo = r.sched_fifo_errno == 0;
         }
-        r.mlockall = libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0;
+        r.mlockall = lock_memory && libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0;
     }
     r
 }
