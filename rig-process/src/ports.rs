@@ -113,17 +113,67 @@ pub(crate) fn pubsub<T: core::fmt::Debug + ZeroCopySend + Copy>(
     rig: &str,
     svc: &str,
 ) -> Result<PsFactory<T>, PortError> {
-    node.service_builder(&service_name(rig, svc)?)
-        .publish_subscribe::<T>()
-        .max_publishers(qos::MAX_PUBLISHERS)
-        .max_subscribers(qos::MAX_SUBSCRIBERS)
-        .max_nodes(qos::MAX_NODES)
-        .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
-        .subscriber_max_borrowed_samples(qos::MAX_BORROWED_SAMPLES)
-        .history_size(qos::HISTORY)
-        .enable_safe_overflow(qos::SAFE_OVERFLOW)
-        .open_or_create()
-        .map_err(|e| err(rig, &format!("open service {svc}"), e))
+    let name = service_name(rig, svc)?;
+    let builder = || {
+        node.service_builder(&name)
+            .publish_subscribe::<T>()
+            .max_publishers(qos::MAX_PUBLISHERS)
+            .max_subscribers(qos::MAX_SUBSCRIBERS)
+            .max_nodes(qos::MAX_NODES)
+            .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
+            .subscriber_max_borrowed_samples(qos::MAX_BORROWED_SAMPLES)
+            .history_size(qos::HISTORY)
+            .enable_safe_overflow(qos::SAFE_OVERFLOW)
+    };
+    use iceoryx2::service::builder::publish_subscribe::{PublishSubscribeCreateError as C, PublishSubscribeOpenError as O};
+    let quick = open_or_create_quickly(
+        || builder().open(),
+        || builder().create(),
+        |e| *e == O::DoesNotExist,
+        |e| matches!(e, C::AlreadyExists | C::IsBeingCreatedByAnotherInstance),
+    );
+    match quick {
+        Some(f) => Ok(f),
+        None => builder().open_or_create().map_err(|e| err(rig, &format!("open service {svc}"), e)),
+    }
+}
+
+/// How long [`open_or_create_quickly`] retries before it leaves the port to iceoryx2, and how
+/// long it sleeps between two tries.
+const QUICK_OPEN_WINDOW: Duration = Duration::from_millis(50);
+const QUICK_OPEN_RETRY: Duration = Duration::from_micros(200);
+
+/// Open a service, or create it, retrying every [`QUICK_OPEN_RETRY`] while another process is
+/// creating it; None when that does not settle within [`QUICK_OPEN_WINDOW`] or either call fails
+/// otherwise (the caller then asks iceoryx2's `open_or_create`, whose outcome and error are the
+/// ones reported). Why: iceoryx2 0.10's `open_or_create` sleeps a fixed 25 ms (its
+/// `IO_TICK_TIME`) whenever it finds the service in creation by another process, and a run starts
+/// the plant, `rig`'s connect watch and the controller at once, all opening the same services:
+/// that sleep was most of the plant's 15-37 ms `ports_ms` and delayed the controller's first
+/// answer to 29-53 ms after launch (2026-12-06).
+fn open_or_create_quickly<S, OE, CE>(
+    open: impl Fn() -> Result<S, OE>,
+    create: impl Fn() -> Result<S, CE>,
+    does_not_exist: impl Fn(&OE) -> bool,
+    in_creation_elsewhere: impl Fn(&CE) -> bool,
+) -> Option<S> {
+    let until = Instant::now() + QUICK_OPEN_WINDOW;
+    loop {
+        match open() {
+            Ok(s) => return Some(s),
+            Err(e) if does_not_exist(&e) => {}
+            Err(_) => return None,
+        }
+        match create() {
+            Ok(s) => return Some(s),
+            Err(e) if in_creation_elsewhere(&e) => {}
+            Err(_) => return None,
+        }
+        if Instant::now() >= until {
+            return None;
+        }
+        std::thread::sleep(QUICK_OPEN_RETRY);
+    }
 }
 
 fn event(
@@ -131,14 +181,26 @@ fn event(
     rig: &str,
     svc: &str,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, PortError> {
-    node.service_builder(&service_name(rig, svc)?)
-        .event()
-        .max_notifiers(qos::MAX_NOTIFIERS)
-        .max_listeners(qos::MAX_LISTENERS)
-        .max_nodes(qos::MAX_NODES)
-        .event_id_max_value(qos::EVENT_ID_MAX)
-        .open_or_create()
-        .map_err(|e| err(rig, svc, e))
+    let name = service_name(rig, svc)?;
+    let builder = || {
+        node.service_builder(&name)
+            .event()
+            .max_notifiers(qos::MAX_NOTIFIERS)
+            .max_listeners(qos::MAX_LISTENERS)
+            .max_nodes(qos::MAX_NODES)
+            .event_id_max_value(qos::EVENT_ID_MAX)
+    };
+    use iceoryx2::service::builder::event::{EventCreateError as C, EventOpenError as O};
+    let quick = open_or_create_quickly(
+        || builder().open(),
+        || builder().create(),
+        |e| *e == O::DoesNotExist,
+        |e| matches!(e, C::AlreadyExists | C::IsBeingCreatedByAnotherInstance),
+    );
+    match quick {
+        Some(f) => Ok(f),
+        None => builder().open_or_create().map_err(|e| err(rig, svc, e)),
+    }
 }
 
 fn publisher<T: core::fmt::Debug + ZeroCopySend + Copy>(
@@ -557,6 +619,48 @@ mod tests {
 
     fn state(tick: u64) -> JointState {
         JointState::at_rest(tick, messages::PlantStatus::Running, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    }
+
+    /// Plant and controller opening the same rig at the same instant (as `rig run` starts them):
+    /// whichever creates each service, the other opens it, and the ports connect. 20 rigs.
+    #[test]
+    fn plant_and_controller_opening_at_once_connect() {
+        for round in 0..20u64 {
+            let rig = unique_rig(&format!("race{round}"));
+            // Both open at once, then both wait until the other has opened; the controller keeps
+            // its ports until the plant has its torque.
+            let (go, opened) = (std::sync::Barrier::new(2), std::sync::Barrier::new(2));
+            let (done, plant_done) = std::sync::mpsc::channel::<()>();
+            let plant_done = std::sync::Mutex::new(plant_done);
+            std::thread::scope(|s| {
+                s.spawn(|| {
+                    go.wait();
+                    let plant = PlantPorts::open(&rig, "race-plant").unwrap();
+                    opened.wait();
+                    let w = Wrench { contract_version: CONTRACT_VERSION, frame: 0, tick: round, force: [1.0, 2.0, 3.0], torque: [0.0; 3] };
+                    plant.publish(&state(round), &w).unwrap();
+                    assert_eq!(plant.wait_torque(Instant::now() + Duration::from_secs(2)), Wake::Notified, "round {round}");
+                    assert_eq!(plant.receive_torque_for(round).unwrap().controller_id, 9, "round {round}");
+                    done.send(()).unwrap();
+                });
+                s.spawn(|| {
+                    go.wait();
+                    let ctrl = ControllerPorts::open(&rig, "race-controller").unwrap();
+                    opened.wait();
+                    assert_eq!(ctrl.wait_state(Instant::now() + Duration::from_secs(2)), Wake::Notified, "round {round}");
+                    assert_eq!(ctrl.receive_state().unwrap().tick, round);
+                    let t = JointTorque {
+                        contract_version: CONTRACT_VERSION,
+                        controller_status: 0,
+                        tick: round,
+                        controller_id: 9,
+                        tau: [1.0; 6],
+                    };
+                    ctrl.publish(&t, None).unwrap();
+                    let _ = plant_done.lock().unwrap().recv_timeout(Duration::from_secs(5));
+                });
+            });
+        }
     }
 
     #[test]
