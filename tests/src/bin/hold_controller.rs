@@ -1,6 +1,7 @@
 //! `hold-controller --rig NAME --scenario FILE [--contract-version N] [--offset-nm X] [--free-joint1]
 //! [--waypoints DQ;DQ;... [--move-s S] [--dwell-s S]]
-//! [--answer-after-us MIN:MAX [--seed N]] [--sleep-before-open-s S] [--open-rig OTHER] [--iceoryx2-defaults]`
+//! [--answer-after-us MIN:MAX [--seed N]] [--sleep-before-open-s S] [--open-rig OTHER] [--iceoryx2-defaults]
+//! [--startup-timeout-s S]`
 //!
 //! `--free-joint1` and `--waypoints` serve the realistic cell's checks (issue 23): joint 1 left to
 //! the offset torque alone (a joint under a known torque against its friction), and the hold
@@ -38,6 +39,11 @@ struct Args {
     /// a loaded host stall for more than the default).
     #[arg(long, default_value_t = 100)]
     silence_ms: u64,
+    /// How long to wait for the plant's first state, s, before exiting with an error (a guard
+    /// against a controller left waiting for ever when a test's plant never starts; long enough
+    /// for a strip model built from an empty cache).
+    #[arg(long, default_value_t = 600.0)]
+    startup_timeout_s: f64,
     /// Constant torque added to joint 1, N m (to make this controller's output recognisable).
     #[arg(long, default_value_t = 0.0)]
     offset_nm: f64,
@@ -207,6 +213,9 @@ fn run(a: &Args) -> anyhow::Result<()> {
         let Some(st) = ports.receive_state() else {
             if hold.is_some() && last_state.elapsed() > Duration::from_millis(a.silence_ms) {
                 anyhow::bail!("plant on rig {:?} is silent for {} ms: assuming it is dead", a.rig, a.silence_ms);
+            }
+            if hold.is_none() && last_state.elapsed().as_secs_f64() > a.startup_timeout_s {
+                anyhow::bail!("no joint state on rig {:?} within {} s of opening the ports: no plant came", a.rig, a.startup_timeout_s);
             }
             continue;
         };
