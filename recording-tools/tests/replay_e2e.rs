@@ -87,11 +87,11 @@ fn wait_for_recording(path: &Path, bytes: u64, limit: Duration) {
 }
 
 /// A lockstep recording of `seconds` with the given controller.
-fn record_lockstep(plant: &Path, controller: &Path, name: &str, seconds: f64) -> PathBuf {
+fn record_lockstep(plant: &Path, controller: &Path, extra: &[&str], name: &str, seconds: f64) -> PathBuf {
     let out = tmp(name);
     let rig = format!("e2e-{}-{name}", std::process::id()).replace(".mcap", "");
     let p = start_plant(plant, &rig, "lockstep", seconds, &out);
-    let c = start_controller(controller, &rig, &[]);
+    let c = start_controller(controller, &rig, extra);
     assert!(wait(p, Duration::from_secs(120)).success(), "plant-sim failed");
     let _ = wait(c, Duration::from_secs(10));
     out
@@ -114,7 +114,10 @@ fn lockstep_replay(file: &Path, controller: PathBuf, json: Option<PathBuf>) -> R
 #[test]
 fn replay_into_the_same_controller_reproduces_its_torques_and_a_changed_one_shows_its_change() {
     let Some((plant, hold)) = binaries() else { return };
-    let file = record_lockstep(&plant, &hold, "lockstep.mcap", 0.3);
+    // hold-controller takes a plant silent for 100 ms for dead by default; a loaded CI host
+    // stalled this test's plant for 365 ms once (2026-12-06), and the run then ended in a safe
+    // stop. This test is not about stalls: 5 s.
+    let file = record_lockstep(&plant, &hold, &["--silence-ms", "5000"], "lockstep.mcap", 0.3);
     let rec = Recording::open_complete(&file).unwrap();
     let ticks = rec.check_continuity().unwrap();
     assert_eq!(rec.joint_state.len(), 300, "{ticks:?}");
@@ -188,7 +191,7 @@ fn replay_into_the_force_controller_reproduces_its_torques() {
         println!("SKIP: {} not built (cargo build --release -p controller)", controller.display());
         return;
     }
-    let file = record_lockstep(&plant, &controller, "force.mcap", 1.5);
+    let file = record_lockstep(&plant, &controller, &[], "force.mcap", 1.5);
     let rec = Recording::open_complete(&file).unwrap();
     rec.check_continuity().unwrap();
     let out = recording_tools::replay::run(&lockstep_replay(&file, controller, Some(tmp("force-replay.json")))).unwrap();
