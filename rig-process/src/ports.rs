@@ -125,17 +125,8 @@ pub(crate) fn pubsub<T: core::fmt::Debug + ZeroCopySend + Copy>(
             .history_size(qos::HISTORY)
             .enable_safe_overflow(qos::SAFE_OVERFLOW)
     };
-    use iceoryx2::service::builder::publish_subscribe::{PublishSubscribeCreateError as C, PublishSubscribeOpenError as O};
-    let quick = open_or_create_quickly(
-        || builder().open(),
-        || builder().create(),
-        |e| *e == O::DoesNotExist,
-        |e| matches!(e, C::AlreadyExists | C::IsBeingCreatedByAnotherInstance),
-    );
-    match quick {
-        Some(f) => Ok(f),
-        None => builder().open_or_create().map_err(|e| err(rig, &format!("open service {svc}"), e)),
-    }
+    open_or_create_quickly(|| builder().open(), || builder().create(), || builder().open_or_create())
+        .map_err(|e| err(rig, &format!("open service {svc}"), e))
 }
 
 /// How long [`open_or_create_quickly`] retries before it leaves the port to iceoryx2, and how
@@ -143,37 +134,73 @@ pub(crate) fn pubsub<T: core::fmt::Debug + ZeroCopySend + Copy>(
 const QUICK_OPEN_WINDOW: Duration = Duration::from_millis(50);
 const QUICK_OPEN_RETRY: Duration = Duration::from_micros(200);
 
+/// An iceoryx2 open error that may only mean "nobody has created it yet".
+trait OpenError {
+    fn does_not_exist(&self) -> bool;
+}
+
+/// An iceoryx2 create error that may only mean "another process created it, or is creating it".
+trait CreateError {
+    fn created_elsewhere(&self) -> bool;
+}
+
+use iceoryx2::service::builder::{event as ev, publish_subscribe as ps};
+
+impl OpenError for ps::PublishSubscribeOpenError {
+    fn does_not_exist(&self) -> bool {
+        *self == Self::DoesNotExist
+    }
+}
+
+impl OpenError for ev::EventOpenError {
+    fn does_not_exist(&self) -> bool {
+        *self == Self::DoesNotExist
+    }
+}
+
+impl CreateError for ps::PublishSubscribeCreateError {
+    fn created_elsewhere(&self) -> bool {
+        matches!(self, Self::AlreadyExists | Self::IsBeingCreatedByAnotherInstance)
+    }
+}
+
+impl CreateError for ev::EventCreateError {
+    fn created_elsewhere(&self) -> bool {
+        matches!(self, Self::AlreadyExists | Self::IsBeingCreatedByAnotherInstance)
+    }
+}
+
 /// Open a service, or create it, retrying every [`QUICK_OPEN_RETRY`] while another process is
-/// creating it; None when that does not settle within [`QUICK_OPEN_WINDOW`] or either call fails
-/// otherwise (the caller then asks iceoryx2's `open_or_create`, whose outcome and error are the
-/// ones reported). Why: iceoryx2 0.10's `open_or_create` sleeps a fixed 25 ms (its
-/// `IO_TICK_TIME`) whenever it finds the service in creation by another process, and a run starts
-/// the plant, `rig`'s connect watch and the controller at once, all opening the same services:
-/// that sleep was most of the plant's 15-37 ms `ports_ms` and delayed the controller's first
-/// answer to 29-53 ms after launch (2026-12-06).
-fn open_or_create_quickly<S, OE, CE>(
+/// creating it; when that does not settle within [`QUICK_OPEN_WINDOW`] or either call fails
+/// otherwise, iceoryx2's `open_or_create` decides, and its outcome and error are the ones
+/// reported. Why: iceoryx2 0.10's `open_or_create` sleeps a fixed 25 ms (its `IO_TICK_TIME`)
+/// whenever it finds the service in creation by another process, and a run starts the plant,
+/// `rig`'s connect watch and the controller at once, all opening the same services: that sleep
+/// was most of the plant's 15-37 ms `ports_ms` and delayed the controller's first answer to
+/// 29-53 ms after launch (2026-12-06).
+fn open_or_create_quickly<S, OE: OpenError, CE: CreateError, E>(
     open: impl Fn() -> Result<S, OE>,
     create: impl Fn() -> Result<S, CE>,
-    does_not_exist: impl Fn(&OE) -> bool,
-    in_creation_elsewhere: impl Fn(&CE) -> bool,
-) -> Option<S> {
+    open_or_create: impl FnOnce() -> Result<S, E>,
+) -> Result<S, E> {
     let until = Instant::now() + QUICK_OPEN_WINDOW;
     loop {
         match open() {
-            Ok(s) => return Some(s),
-            Err(e) if does_not_exist(&e) => {}
-            Err(_) => return None,
+            Ok(s) => return Ok(s),
+            Err(e) if e.does_not_exist() => {}
+            Err(_) => break,
         }
         match create() {
-            Ok(s) => return Some(s),
-            Err(e) if in_creation_elsewhere(&e) => {}
-            Err(_) => return None,
+            Ok(s) => return Ok(s),
+            Err(e) if e.created_elsewhere() => {}
+            Err(_) => break,
         }
         if Instant::now() >= until {
-            return None;
+            break;
         }
         std::thread::sleep(QUICK_OPEN_RETRY);
     }
+    open_or_create()
 }
 
 fn event(
@@ -190,17 +217,7 @@ fn event(
             .max_nodes(qos::MAX_NODES)
             .event_id_max_value(qos::EVENT_ID_MAX)
     };
-    use iceoryx2::service::builder::event::{EventCreateError as C, EventOpenError as O};
-    let quick = open_or_create_quickly(
-        || builder().open(),
-        || builder().create(),
-        |e| *e == O::DoesNotExist,
-        |e| matches!(e, C::AlreadyExists | C::IsBeingCreatedByAnotherInstance),
-    );
-    match quick {
-        Some(f) => Ok(f),
-        None => builder().open_or_create().map_err(|e| err(rig, svc, e)),
-    }
+    open_or_create_quickly(|| builder().open(), || builder().create(), || builder().open_or_create()).map_err(|e| err(rig, svc, e))
 }
 
 fn publisher<T: core::fmt::Debug + ZeroCopySend + Copy>(
