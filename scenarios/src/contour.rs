@@ -57,18 +57,48 @@ pub struct ContourPoint {
     pub curvature_per_m: f64,
     /// Index of the piece the point lies on.
     pub piece: usize,
+    /// The heading's sine and cosine, as [`Heading`] found them.
+    sin_h: f64,
+    cos_h: f64,
 }
 
 impl ContourPoint {
     /// The unit tangent (task z of the moving frame), base x and y.
     pub fn tangent(&self) -> [f64; 2] {
-        [self.heading_rad.cos(), self.heading_rad.sin()]
+        [self.cos_h, self.sin_h]
     }
 
     /// The unit lateral direction to the left (task x of the moving frame), base x and y.
     pub fn left(&self) -> [f64; 2] {
-        [-self.heading_rad.sin(), self.heading_rad.cos()]
+        [-self.sin_h, self.cos_h]
     }
+}
+
+/// A heading (rad, from base +x towards base +y) with its sine and cosine, found once: the
+/// plant projects the wheel onto the contour every substep and the controller every tick, and
+/// the sines and cosines of the pieces' start headings were a tenth of the plant's time on the
+/// sunroof (perf, 2026-12-06). `f64::sin_cos` is `(sin, cos)`, so every value is the one the
+/// per-call `sin()` and `cos()` gave, bit for bit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Heading {
+    rad: f64,
+    sin: f64,
+    cos: f64,
+}
+
+impl Heading {
+    fn new(rad: f64) -> Heading {
+        let (sin, cos) = rad.sin_cos();
+        Heading { rad, sin, cos }
+    }
+}
+
+/// Where a piece starts: its arc length (m), point (base x and y, m) and heading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Start {
+    s_m: f64,
+    xy_base_m: [f64; 2],
+    heading: Heading,
 }
 
 /// Why a contour was refused, and which piece (its index in the file's list) or field it is.
@@ -100,8 +130,10 @@ pub const CLOSURE_TOLERANCE_RAD: f64 = 1e-6;
 pub struct Contour {
     pieces: Vec<Piece>,
     /// Per piece: arc length, point and heading at its start.
-    starts: Vec<(f64, [f64; 2], f64)>,
+    starts: Vec<Start>,
     length_m: f64,
+    /// The shortest piece's length, m ([`Contour::project_near`]'s fall-back distance).
+    shortest_m: f64,
     closed: bool,
 }
 
@@ -123,7 +155,7 @@ impl Contour {
             return Err(ContourError { piece: None, why: "has no pieces".into() });
         }
         let mut starts = Vec::with_capacity(pieces.len());
-        let (mut s, mut p, mut h) = (0.0, start_xy_base_m, start_heading_rad);
+        let (mut s, mut p, mut h) = (0.0, start_xy_base_m, Heading::new(start_heading_rad));
         for (i, piece) in pieces.iter().enumerate() {
             match *piece {
                 Piece::Line { length_m } => {
@@ -146,7 +178,7 @@ impl Contour {
                     }
                 }
             }
-            starts.push((s, p, h));
+            starts.push(Start { s_m: s, xy_base_m: p, heading: h });
             (p, h) = end_of(piece, p, h, piece.length_m());
             s += piece.length_m();
         }
@@ -155,7 +187,7 @@ impl Contour {
             if gap > CLOSURE_TOLERANCE_M {
                 return Err(ContourError { piece: None, why: format!("is closed but its end is {:.3} mm from its start", gap * 1e3) });
             }
-            let jump = wrap_pi(h - start_heading_rad);
+            let jump = wrap_pi(h.rad - start_heading_rad);
             if jump.abs() > CLOSURE_TOLERANCE_RAD {
                 return Err(ContourError {
                     piece: None,
@@ -163,7 +195,8 @@ impl Contour {
                 });
             }
         }
-        Ok(Contour { pieces: pieces.to_vec(), starts, length_m: s, closed })
+        let shortest_m = pieces.iter().map(Piece::length_m).fold(f64::INFINITY, f64::min);
+        Ok(Contour { pieces: pieces.to_vec(), starts, length_m: s, shortest_m, closed })
     }
 
     /// A closed rounded rectangle, `width_m` along the start heading and `height_m` across it, with
@@ -202,19 +235,32 @@ impl Contour {
 
     /// Arc length at which piece `i` starts, m.
     pub fn piece_start_m(&self, i: usize) -> f64 {
-        self.starts[i].0
+        self.starts[i].s_m
     }
 
     /// The point at arc length `s_m`: a closed contour wraps around (a run that overlaps its start
     /// goes on round), an open one is held at its ends.
     pub fn at(&self, s_m: f64) -> ContourPoint {
-        let s = if self.closed { s_m.rem_euclid(self.length_m) } else { s_m.clamp(0.0, self.length_m) };
-        // The last piece starting at or before s.
-        let i = self.starts.partition_point(|st| st.0 <= s).saturating_sub(1);
-        let (s0, p0, h0) = self.starts[i];
+        let (s, i) = self.piece_at(s_m);
+        let Start { s_m: s0, xy_base_m: p0, heading: h0 } = self.starts[i];
         let piece = &self.pieces[i];
-        let (xy, heading) = end_of(piece, p0, h0, (s - s0).min(piece.length_m()));
-        ContourPoint { s_m: s, xy_base_m: xy, heading_rad: heading, curvature_per_m: piece.curvature_per_m(), piece: i }
+        let (xy, h) = end_of(piece, p0, h0, (s - s0).min(piece.length_m()));
+        ContourPoint {
+            s_m: s,
+            xy_base_m: xy,
+            heading_rad: h.rad,
+            curvature_per_m: piece.curvature_per_m(),
+            piece: i,
+            sin_h: h.sin,
+            cos_h: h.cos,
+        }
+    }
+
+    /// Arc length `s_m` wrapped around a closed contour or held at an open one's ends, and the
+    /// index of the piece it lies on (the last one starting at or before it).
+    fn piece_at(&self, s_m: f64) -> (f64, usize) {
+        let s = if self.closed { s_m.rem_euclid(self.length_m) } else { s_m.clamp(0.0, self.length_m) };
+        (s, self.starts.partition_point(|st| st.s_m <= s).saturating_sub(1))
     }
 
     /// The nearest point of the contour to `xy_base_m`: its arc length and the signed lateral
@@ -241,7 +287,7 @@ impl Contour {
         if n <= 3 {
             return self.project(xy_base_m);
         }
-        let i = self.at(s_hint_m).piece;
+        let i = self.piece_at(s_hint_m).1;
         let before = if i > 0 {
             i - 1
         } else if self.closed {
@@ -270,8 +316,7 @@ impl Contour {
             }
         }
         let (dist, s, lateral) = best.expect("three pieces");
-        let shortest = self.pieces.iter().map(Piece::length_m).fold(f64::INFINITY, f64::min);
-        if dist > shortest {
+        if dist > self.shortest_m {
             return self.project(xy_base_m);
         }
         (s, lateral)
@@ -280,19 +325,19 @@ impl Contour {
     /// Distance from `xy_base_m` to piece `i`'s nearest point, that point's arc length, and the
     /// signed lateral offset there.
     fn foot_on(&self, i: usize, xy_base_m: [f64; 2]) -> (f64, f64, f64) {
-        let (s0, p0, h0) = self.starts[i];
+        let Start { s_m: s0, xy_base_m: p0, heading: h0 } = self.starts[i];
         let piece = &self.pieces[i];
         let a = nearest_along(piece, p0, h0, xy_base_m);
         let (foot, h) = end_of(piece, p0, h0, a);
         let d = [xy_base_m[0] - foot[0], xy_base_m[1] - foot[1]];
-        (d[0].hypot(d[1]), s0 + a, -d[0] * h.sin() + d[1] * h.cos())
+        (d[0].hypot(d[1]), s0 + a, -d[0] * h.sin + d[1] * h.cos)
     }
 
     /// The highest speed (m/s) at arc length `s_m` at which the lateral acceleration `v² κ` stays
     /// within `lateral_accel_mps2`: the time law's rule for slowing down in arcs (unbounded on a
     /// line).
     pub fn speed_limit_mps(&self, s_m: f64, lateral_accel_mps2: f64) -> f64 {
-        let k = self.at(s_m).curvature_per_m.abs();
+        let k = self.pieces[self.piece_at(s_m).1].curvature_per_m().abs();
         if k == 0.0 {
             f64::INFINITY
         } else {
@@ -512,30 +557,29 @@ impl Contour {
 }
 
 /// Point and heading a distance `a_m` (0 ≤ a ≤ the piece's length) into `piece` from `(p, h)`.
-fn end_of(piece: &Piece, p: [f64; 2], h: f64, a_m: f64) -> ([f64; 2], f64) {
+fn end_of(piece: &Piece, p: [f64; 2], h: Heading, a_m: f64) -> ([f64; 2], Heading) {
     match *piece {
-        Piece::Line { .. } => ([p[0] + a_m * h.cos(), p[1] + a_m * h.sin()], h),
+        Piece::Line { .. } => ([p[0] + a_m * h.cos, p[1] + a_m * h.sin], h),
         Piece::Arc { radius_m, turn_rad } => {
             let side = turn_rad.signum();
             let dh = side * a_m / radius_m;
             // Chord form: exact for any turn, no centre needed.
-            let (s, c) = (h + dh).sin_cos();
-            let (s0, c0) = h.sin_cos();
-            ([p[0] + side * radius_m * (s - s0), p[1] - side * radius_m * (c - c0)], h + dh)
+            let end = Heading::new(h.rad + dh);
+            ([p[0] + side * radius_m * (end.sin - h.sin), p[1] - side * radius_m * (end.cos - h.cos)], end)
         }
     }
 }
 
 /// The distance into `piece` (starting at `(p, h)`) of its point nearest to `xy`.
-fn nearest_along(piece: &Piece, p: [f64; 2], h: f64, xy: [f64; 2]) -> f64 {
+fn nearest_along(piece: &Piece, p: [f64; 2], h: Heading, xy: [f64; 2]) -> f64 {
     let d = [xy[0] - p[0], xy[1] - p[1]];
     match *piece {
-        Piece::Line { length_m } => (d[0] * h.cos() + d[1] * h.sin()).clamp(0.0, length_m),
+        Piece::Line { length_m } => (d[0] * h.cos + d[1] * h.sin).clamp(0.0, length_m),
         Piece::Arc { radius_m, turn_rad } => {
             let side = turn_rad.signum();
             // The centre, on the side the arc bends to; the angle swept from the start radius to
             // xy's, counted in the turn's sense, in [0, 2π).
-            let c = [p[0] - side * radius_m * h.sin(), p[1] + side * radius_m * h.cos()];
+            let c = [p[0] - side * radius_m * h.sin, p[1] + side * radius_m * h.cos];
             let (r0, r) = ([p[0] - c[0], p[1] - c[1]], [xy[0] - c[0], xy[1] - c[1]]);
             let phi = (side * (r0[0] * r[1] - r0[1] * r[0]).atan2(r0[0] * r[0] + r0[1] * r[1])).rem_euclid(TAU);
             let total = turn_rad.abs();
