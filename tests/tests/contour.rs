@@ -164,9 +164,14 @@ fn a_roll_started_in_a_corner_presses_and_rolls_as_from_a_line() {
 
 /// The same lap in real time. The host may stall the loop (held torques, skipped periods) and
 /// the recorder's writer (a full queue drops ticks: exit 4), so here the run tolerates long
-/// stalls (`HOST_STALLS_TOLERATED`) and its recorder a 16 s queue; it must end normally with the
-/// whole lap rolled and no reflex, and when the host gave the loop every period its force holds
-/// the thesis' bound on every segment (the figures are printed either way).
+/// stalls (`loop.max_consecutive_misses = 1000`) and its recorder a 16 s queue; it must end
+/// normally with no reflex, and when the host gave the loop every period its force holds the
+/// thesis' bound on every segment (the figures are printed either way). The lap: the controller's plan stands
+/// still for every state in which the plant held its torque (`ReferenceGenerator::hold`, the
+/// reference clock's anti-windup), and the run's duration is fixed, so the roll ends short of
+/// the lap's end by at most the held time at the roll's top speed (1000 to 2900 held ticks on a
+/// host stalling for up to 19 ms, 2026-12-06, ended it 30 to 100 mm short); with no tick held,
+/// the whole lap.
 #[test]
 fn the_sunroof_lap_runs_in_real_time() {
     let rig = unique_rig("sunroof-rt");
@@ -184,7 +189,11 @@ fn the_sunroof_lap_runs_in_real_time() {
     use recordings::EventKind;
     assert!(rec.events.iter().all(|e| !matches!(e.kind, Some(EventKind::Reflex | EventKind::EndStop))), "{:?}", rec.events);
     let rolling = n.rolling.as_ref().expect("a rolling phase");
-    assert!((rolling.z_to_m - 1.220).abs() < 1e-3, "{rolling:?}");
+    let held = rec.joint_state.iter().filter(|s| s.plant_status == messages::PlantStatus::HoldingTorque as u32).count();
+    let top_speed_mps = Scenario::load(&sunroof()).unwrap().contour.speed_mm_s * 1e-3;
+    let short_by_at_most_m = held as f64 * rec.period_s() * top_speed_mps;
+    eprintln!("{held} held ticks: the roll ends at {:.1} mm, at most {:.1} mm short", rolling.z_to_m * 1e3, short_by_at_most_m * 1e3);
+    assert!(rolling.z_to_m <= 1.220 + 1e-3 && rolling.z_to_m >= 1.220 - 1e-3 - short_by_at_most_m, "{held} held ticks: {rolling:?}");
     let worst = n.contour.as_ref().unwrap().iter().filter_map(|g| g.force_error_max_abs_n).fold(0.0, f64::max);
     eprintln!("real time: {} misses; worst segment's force error {worst:.3} N", n.misses);
     if n.misses == 0 {
