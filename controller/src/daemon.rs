@@ -110,9 +110,18 @@ fn controller_id(pid: u32) -> u64 {
 /// Run the controller until the plant shuts down (Ok) or a fault (Err, non-zero exit).
 pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     let s = &cfg.scenario;
+    // Silence after which the plant is asked about: dead (its node, see rig_process::liveness) ends
+    // the run at once; alive but silent (a stalled host, SIGSTOP) is waited for up to
+    // `loop.peer_stall_timeout_s`. In lockstep the plant may legitimately be slow (a loaded
+    // machine): its own torque watchdog is the first measure there. The watcher sets up its node
+    // while this thread opens the ports and builds the controller (before the real-time set-up,
+    // so it keeps the normal scheduling policy).
+    let watch = rig_process::liveness::PeerWatch::start(&cfg.rig, "controller-watch", rig_process::liveness::Watched::Plant)
+        .with_context(|| format!("controller for rig {:?}", cfg.rig))?;
     let ports = ControllerPorts::open(&cfg.rig, "controller").with_context(|| format!("controller for rig {:?}", cfg.rig))?;
     let mut controller =
         Controller::from_scenario(s).with_id(controller_id(std::process::id())).with_contract_version(cfg.contract_version);
+    let watch = watch.ready().with_context(|| format!("controller for rig {:?}", cfg.rig))?;
     setup_realtime(cfg.rt_priority);
     tracing::info!(rig = %cfg.rig, contract_version = cfg.contract_version, "controller waiting for the plant");
 
@@ -124,12 +133,6 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     let mut summary = DaemonSummary::default();
     let mut compute_sum_ns: u128 = 0;
 
-    // Silence after which the plant is asked about: dead (its node, see rig_process::liveness) ends
-    // the run at once; alive but silent (a stalled host, SIGSTOP) is waited for up to
-    // `loop.peer_stall_timeout_s`. In lockstep the plant may legitimately be slow (a loaded
-    // machine): its own torque watchdog is the first measure there.
-    let watch = rig_process::liveness::PeerWatch::spawn(&cfg.rig, "controller-watch", rig_process::liveness::Watched::Plant)
-        .with_context(|| format!("controller for rig {:?}", cfg.rig))?;
     let stall_timeout = Duration::from_secs_f64(s.loop_.peer_stall_timeout_s).max(cfg.dead_plant_timeout);
     let lockstep_silence = cfg.dead_plant_timeout.max(Duration::from_secs_f64(s.loop_.lockstep_watchdog_s));
     let mut silence = cfg.dead_plant_timeout;

@@ -316,10 +316,12 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     };
     let ports_and_watch = || -> anyhow::Result<(rig_process::ports::PlantPorts, rig_process::liveness::PeerWatch, std::time::Duration)> {
         let t0 = std::time::Instant::now();
-        let ports = rig_process::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
         // Liveness of the controllers' nodes, on its own thread (started before the loop's
-        // real-time set-up, so it keeps the normal scheduling policy).
-        let watch = rig_process::liveness::PeerWatch::spawn(&opts.rig, "plant-sim-watch", rig_process::liveness::Watched::Controllers)?;
+        // real-time set-up, so it keeps the normal scheduling policy), setting up while this
+        // thread opens the ports.
+        let watch = rig_process::liveness::PeerWatch::start(&opts.rig, "plant-sim-watch", rig_process::liveness::Watched::Controllers)?;
+        let ports = rig_process::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
+        let watch = watch.ready()?;
         Ok((ports, watch, t0.elapsed()))
     };
     let (set_up, opened) = std::thread::scope(|scope| {
