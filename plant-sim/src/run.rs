@@ -361,9 +361,14 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     // Both modes: lockstep hands over twice a tick too, and each hand-over to a halted vCPU
     // costs its wake-up.
     if l.idle_poll {
-        match rt::hold_idle_poll() {
-            Ok(()) => tracing::info!("idle CPUs poll while the plant runs (PM QoS /dev/cpu_dma_latency = 0 µs; loop.idle_poll)"),
-            Err(e) => tracing::warn!("could not hold /dev/cpu_dma_latency at 0 µs ({e}): idle CPUs may halt, wake-ups cost more"),
+        match (rt::hold_idle_poll(), rt::cpuidle_driver()) {
+            (Ok(()), Some(driver)) => tracing::info!(
+                "idle CPUs poll while the plant runs (PM QoS /dev/cpu_dma_latency = 0 µs, cpuidle driver {driver}; loop.idle_poll)"
+            ),
+            (Ok(()), None) => tracing::info!(
+                "PM QoS /dev/cpu_dma_latency held at 0 µs (loop.idle_poll), but this kernel has no cpuidle driver to read it: idle CPUs halt anyway (only loop.spin_wait_us and loop.controller_spin_us shorten wake-ups)"
+            ),
+            (Err(e), _) => tracing::warn!("could not hold /dev/cpu_dma_latency at 0 µs ({e}): idle CPUs may halt, wake-ups cost more"),
         }
     }
     if mode == Mode::Realtime && (!rt_setup.sched_fifo || !rt_setup.mlockall) {

@@ -77,10 +77,22 @@ pub fn set_thread_nice(nice: i32) -> bool {
     }
 }
 
+/// The kernel's cpuidle driver (`/sys/devices/system/cpu/cpuidle/current_driver`), None when it
+/// has none. Only a cpuidle governor reads the PM QoS CPU latency request: without a driver an
+/// idle CPU runs the architecture's default idle (`hlt`) whatever the request says (the
+/// development VM: driver `none`, and `perf` finds the idle vCPU in `pv_native_safe_halt` while
+/// the request is held).
+pub fn cpuidle_driver() -> Option<String> {
+    let d = std::fs::read_to_string("/sys/devices/system/cpu/cpuidle/current_driver").ok()?;
+    let d = d.trim();
+    (!d.is_empty() && d != "none").then(|| d.to_string())
+}
+
 /// Hold the kernel's PM QoS CPU latency request at 0 µs for the rest of the process, as cyclictest
 /// does: idle CPUs then poll instead of halting, so a wake-up (the controller's notification, the
 /// tick timer) costs a few µs instead of a vCPU exit and an inter-processor interrupt (tens of µs
-/// on a VM). The request lasts while the file stays open; the kernel drops it when we exit.
+/// on a VM), where the kernel has a cpuidle driver ([`cpuidle_driver`]). The request lasts while
+/// the file stays open; the kernel drops it when we exit.
 pub fn hold_idle_poll() -> std::io::Result<()> {
     use std::io::Write;
     static HELD: std::sync::OnceLock<std::fs::File> = std::sync::OnceLock::new();

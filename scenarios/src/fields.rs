@@ -366,7 +366,7 @@ pub static FIELDS: &[Field] = &[
     num("loop.connect_timeout_s", "s", range(lo_ex(0.0), hi_in(3600.0)), "How long `rig` waits, from the plant's first state, for the controller process it started to answer one (lockstep: tick 0); a controller alive but silent that long is named with what `rig` saw of it (no iceoryx2 node of the rig, a node but no torque publisher, torques of another contract version), both daemons are stopped and `rig` exits 3."),
     num("loop.spin_wait_us", "µs", range(lo_in(0.0), of(1.0, "loop.torque_budget_us", true)), "Real-time mode: the plant busy-polls for the torque this long after publishing before it sleeps on the event (0 = never spin)."),
     num("loop.controller_spin_us", "µs", range(lo_in(0.0), of(0.5e6, "loop.period_s", false)), "Real-time mode: the controller busy-polls from this long before the state is due until this long after (0 = always sleep on the event)."),
-    flag("loop.idle_poll", "Real-time mode: hold the kernel's PM QoS CPU latency request at 0 while the plant runs (needs root; refused requests are logged)."),
+    flag("loop.idle_poll", "Hold the kernel's PM QoS CPU latency request at 0 while the plant runs, either mode (needs root; refused requests are logged; without a cpuidle driver the kernel ignores it, and the log says so)."),
     // [robot]
     num("robot.tool_mass_kg", "kg", range(lo_in(0.0), hi_in(20.0)), "Mass of the applicator tool (bracket and wheel); at most the IRB 2400's 20 kg payload class."),
     num("robot.tool_offset_m", "m", range(lo_ex(0.0), hi_in(0.5)), "Tool centre point (wheel centre) offset from the flange along the flange z axis."),

@@ -307,9 +307,11 @@ pub struct LoopConfig {
     /// due until this long after, µs (0 = always sleep on the event). Costs up to twice this much
     /// CPU per tick; saves the controller's wake-up from the round trip.
     pub controller_spin_us: f64,
-    /// Real-time mode: while the plant runs, hold the kernel's PM QoS CPU latency request at 0
+    /// While the plant runs (either mode), hold the kernel's PM QoS CPU latency request at 0
     /// (`/dev/cpu_dma_latency`, as cyclictest does) so idle CPUs poll instead of halting and wake
-    /// at once. Needs root; refused requests are logged and the run goes on.
+    /// at once. Needs root; refused requests are logged and the run goes on. Only a cpuidle
+    /// governor reads the request: on a kernel without a cpuidle driver it changes nothing (the
+    /// plant's log says so).
     pub idle_poll: bool,
 }
 
