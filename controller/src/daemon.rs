@@ -130,6 +130,8 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     let mut last_tick: Option<u64> = None;
     let mut wrench =
         Wrench { contract_version: cfg.contract_version, frame: WrenchFrame::BaseAtTcp as u32, tick: 0, force: [0.0; 3], torque: [0.0; 3] };
+    // `wrench` is the plant's only once one came (its tick 0 says nothing before).
+    let mut wrench_seen = false;
     let mut summary = DaemonSummary::default();
     let mut compute_sum_ns: u128 = 0;
 
@@ -243,11 +245,20 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
             if let Some(w) = ports.receive_wrench() {
                 check_version(cfg.contract_version, w.contract_version, "wrench").map_err(anyhow::Error::from)?;
                 wrench = w;
+                wrench_seen = true;
             }
-            if wrench.tick >= state.tick || Instant::now() >= wrench_wait_until {
+            if (wrench_seen && wrench.tick >= state.tick) || Instant::now() >= wrench_wait_until {
                 break;
             }
             std::hint::spin_loop();
+        }
+        if !wrench_seen {
+            // No wrench yet: this subscriber connected after the plant sent this tick's, and
+            // iceoryx2 hands a late subscriber the history only at the publisher's next send.
+            // Answering now would feed a zero wrench to the sensor chain (the cell scenario's
+            // tare averaged it, and 1 lockstep run in 4 came out different); the plant sends both
+            // again (lockstep republishes tick 0 every 5 ms; real time sends the next tick).
+            continue;
         }
         if last_tick.is_some_and(|t| state.tick <= t) {
             continue; // already answered

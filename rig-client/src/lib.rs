@@ -257,6 +257,8 @@ pub struct RigClient {
     woke_mono_ns: u64,
     next_due: Option<Instant>,
     wrench: Wrench,
+    /// `wrench` is the plant's only once one came (its tick 0 says nothing before).
+    wrench_seen: bool,
 }
 
 /// How long a wait looks at the plant's node between checks (the liveness watcher's period).
@@ -343,6 +345,7 @@ fn open(rig: &str, role: &str, scenario_path: Option<&str>, timeout: Duration) -
         woke_mono_ns: 0,
         next_due: None,
         wrench: Wrench { contract_version: CONTRACT_VERSION, frame: 0, tick: 0, force: [0.0; 3], torque: [0.0; 3] },
+        wrench_seen: false,
     })
 }
 
@@ -439,11 +442,19 @@ impl RigClient {
                         return fail(RIG_ERR_CONTRACT_VERSION, format!("rig-client: {e}"));
                     }
                     self.wrench = w;
+                    self.wrench_seen = true;
                 }
-                if self.wrench.tick >= st.tick || Instant::now() >= until {
+                if (self.wrench_seen && self.wrench.tick >= st.tick) || Instant::now() >= until {
                     break;
                 }
                 std::hint::spin_loop();
+            }
+            if !self.wrench_seen {
+                // No wrench yet: this subscriber connected after the plant sent this tick's, and
+                // iceoryx2 hands a late subscriber the history only at the publisher's next send;
+                // the plant sends both again (lockstep republishes tick 0 every 5 ms). A zero
+                // wrench handed out now is not the plant's (the controller daemon's rule).
+                continue;
             }
             self.current_tick = st.tick;
             self.woke = woke;

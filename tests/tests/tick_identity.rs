@@ -114,6 +114,20 @@ fn the_top_line_on_scene_ticks_only_changes_nothing_the_recording_reads() {
     assert!(top_seen, "the strip deformed under the wheel on some scene tick");
 }
 
+/// A controller whose wrench subscriber connected after the plant had sent tick 0's wrench
+/// answered tick 0 with a zero wrench, which the cell's tare then averaged in: 3 of 12 lockstep
+/// runs of `cell.toml` gave another digest (2026-12-06). The controller now waits for the plant's
+/// wrench (the plant sends tick 0 again); the race is caught here with a probability of about
+/// 0.9 per run of this test, and every run must give the pinned digest.
+#[test]
+fn the_cell_gives_its_pinned_digest_run_after_run() {
+    let want = EXPECTED.iter().find(|(name, _)| *name == "cell").expect("the cell is pinned").1;
+    for run in 0..8 {
+        let rec = lockstep("cell", &[]);
+        assert_eq!(physics_digest(&rec), want, "run {run} of the cell: the lockstep physics changed");
+    }
+}
+
 /// The window chain and the contour (`sunroof.toml` to 400 mm: the approach, the press, the
 /// first corner and the short side after it), pinned at 07b7d45 like `EXPECTED`: a refactor of
 /// the chain's contact, its record or the contour's path changes this digest. Through the
