@@ -290,10 +290,9 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     // start-up"). Without a thread, one after the other.
     let physics_then_recorder = || -> anyhow::Result<(Physics, Option<Recorder>, std::time::Duration, std::time::Duration)> {
         let t0 = std::time::Instant::now();
-        // With every CPU, as on the main thread: building a strip model factors in faer's
-        // global parallelism, whose pool takes its size from the affinity of the thread that
-        // first uses it, and a pool of another size gives other bits (an EGM digest moved when
-        // this ran after the line below).
+        // With every CPU, as on the main thread: a strip model built on a cache miss uses faer's
+        // pool, which takes its size from the affinity of the thread that first uses it (the
+        // bits do not depend on that size: the build's task count is fixed, strip::BUILD_TASKS).
         let physics = Physics::new(&scenario, &opts.cache_dir)?;
         let t_physics = t0.elapsed();
         if mode == Mode::Lockstep && !rt::keep_thread_off_cpu(lockstep_cpu) {

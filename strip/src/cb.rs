@@ -87,6 +87,7 @@ fn sparse_t_dense(a: &Csc, x: faer::MatRef<'_, f64>) -> Mat<f64> {
 
 impl CraigBampton {
     pub fn build(sys: &FullSystem, p: &StripParams) -> Result<CraigBampton> {
+        crate::fix_build_parallelism();
         let mut t = std::time::Instant::now();
         let nf = sys.n_free();
         let mut boundary = Vec::new();

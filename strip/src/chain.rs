@@ -59,6 +59,7 @@ pub struct StaticOutputs {
 impl FullStatics {
     pub fn build(p: &StripParams) -> Result<FullStatics> {
         p.validate()?;
+        crate::fix_build_parallelism();
         let sys = FullSystem::build(p);
         let fact = Cholesky::new(&sys.k_ff, "full statics K_ff")?;
         let top_xyz_m = sys.top_nodes.iter().map(|&n| sys.mesh.coords[n]).collect();
@@ -226,6 +227,7 @@ pub struct ChainWheel {
 impl ChainStatics {
     /// `window` is the reduced model of one window (its length is the chain's window length).
     pub fn new(window: StripModel, chain: WindowChain) -> Result<ChainStatics> {
+        crate::fix_build_parallelism();
         let p = &window.params;
         if p.substrate != Substrate::Bonded {
             return Err(numeric("window chain", "the chain is validated for the bonded substrate only"));

@@ -84,6 +84,7 @@ impl LayingModel {
     /// bottom node's tributary area shrinks to the inside of the bend by (R − x) / R, so the
     /// centre line's pressures compare one to one with the straight strip's.
     pub fn build_bent(p: &StripParams, bend_radius_m: Option<f64>) -> Result<LayingModel> {
+        crate::fix_build_parallelism();
         let mesh = Mesh::build(p.length_m, p.element_m);
         let mat = Material { youngs_pa: p.youngs_pa, poisson: p.poisson, density_kg_m3: p.density_kg_m3 };
         let k = match bend_radius_m {

@@ -30,5 +30,18 @@ pub use model::{gaussian_weights, StripModel};
 pub use params::{CbBoundary, StripParams, Substrate};
 pub use stepper::StripStepper;
 
+/// How many tasks faer splits the model build's dense and sparse kernels into, on every machine.
+/// Its default is one per CPU, and the split decides the order of floating-point sums: a model
+/// built with 1, 2 or 4 tasks differs in nearly every bit, so a scenario's physics digest would
+/// depend on the machine. 2 is the count the pinned digests were made with.
+pub const BUILD_TASKS: usize = 2;
+
+/// Fixes faer's global parallelism at [`BUILD_TASKS`] tasks (process-wide: faer's high-level
+/// decompositions read only the global setting). Called by every model build; the plant's
+/// per-tick code uses `Par::Seq` and is unaffected.
+pub fn fix_build_parallelism() {
+    faer::set_global_parallelism(faer::Par::rayon(BUILD_TASKS));
+}
+
 /// Bumped whenever a code change alters built models; part of the cache key.
-pub const CODE_VERSION: &str = "strip-3";
+pub const CODE_VERSION: &str = "strip-4";

@@ -111,6 +111,7 @@ impl StripModel {
     /// Builds the model and returns the intermediate full and CB systems too.
     pub fn build_detailed(p: &StripParams) -> Result<(StripModel, Artifacts)> {
         p.validate()?;
+        crate::fix_build_parallelism();
         let mut tm = Timer { t: Instant::now(), out: Vec::new() };
         crate::progress::stage("mesh and assembly");
         let sys = FullSystem::build(p);

@@ -258,3 +258,25 @@ fn tabulated_wheel_matches_exact_weights() {
         assert!(rel(&r2, &r1) < 1e-5, "z_a {za}: centre reactions {:e}", rel(&r2, &r1));
     }
 }
+
+/// A model is the same bits whatever the machine's CPU count: built inside rayon pools of 1 and
+/// 3 threads (faer's default splits its kernels into one task per thread, and the split decides
+/// the order of floating-point sums), the two agree bit for bit, because the build fixes its
+/// task count (`strip::BUILD_TASKS`). Pinned physics digests rest on this.
+#[test]
+fn a_model_is_the_same_bits_in_any_thread_pool() {
+    let p = params_2mm();
+    let build_in = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("rayon pool");
+        pool.install(|| {
+            // As a fresh process would start: faer's default (one task per pool thread).
+            faer::set_global_parallelism(faer::Par::rayon(0));
+            StripModel::build(&p).expect("build")
+        })
+    };
+    let (one, three) = (build_in(1), build_in(3));
+    assert_eq!((&one.a, &one.b, &one.c, &one.d), (&three.a, &three.b, &three.c, &three.d));
+    assert_eq!((&one.modal.lam, &one.modal.b, &one.modal.c), (&three.modal.lam, &three.modal.b, &three.modal.c));
+    assert_eq!((&one.hsv, &one.bulge_top_uy_m), (&three.hsv, &three.bulge_top_uy_m));
+    assert_eq!(faer::get_global_parallelism(), faer::Par::rayon(strip::BUILD_TASKS));
+}
