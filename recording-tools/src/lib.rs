@@ -10,6 +10,7 @@
 //! - [`strip_rows`] are the `/strip` rows the rolling numbers read: a recording's, or a case's
 //!   kept in memory (a sweep or study case that writes no file).
 //! - [`bond_map`] is a long seal's bond map: the peak pressure at each millimetre of the strip.
+//! - [`roll_end`] says where the roll's reference ended against its plan, and why.
 //! - [`contour_figures`] are a contour run's figures per segment (force, lateral, heading, bond).
 //! - [`compare`] puts several recordings side by side.
 //! - [`replay`] drives a controller open-loop from a recording and compares its torques.
@@ -26,6 +27,7 @@ pub mod plots;
 pub mod read;
 pub mod replay;
 pub mod report;
+pub mod roll_end;
 pub mod strip_rows;
 pub mod tmpfs_test;
 pub mod tracking;

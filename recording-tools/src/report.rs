@@ -111,6 +111,9 @@ pub struct ReportNumbers {
     /// Plant compute time per tick, us.
     pub plant_compute_us: Option<Percentiles>,
     pub rolling: Option<RollingNumbers>,
+    /// Where the roll's reference ended against the scenario's plan (None without a recorded
+    /// scenario or controller reference).
+    pub roll_end: Option<crate::roll_end::RollEnd>,
     /// Real-time recordings: the control success rate (ticks answered in budget over periods),
     /// its worst 100-period window, and the misses per cause ([`crate::attribution`]).
     pub success_rate: Option<f64>,
@@ -167,6 +170,7 @@ pub const NUMBERS_CHANNELS: Channels =
 
 pub fn numbers(rec: &Recording) -> ReportNumbers {
     let bond_map = crate::bond_map::bond_map(rec);
+    let tracking = tracking_ticks(rec);
     let ticks = rec.joint_state.len();
     let period_s = rec.period_s();
     let misses = rec.timing.iter().filter(|t| t.timing.missed).count() as u64;
@@ -213,7 +217,8 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
             .collect(),
         latency_us: Percentiles::of(latency),
         plant_compute_us: Percentiles::of(plant),
-        rolling: rolling_numbers(rec),
+        rolling: rolling_numbers_of(&tracking, &crate::strip_rows::RecordedRows::of(rec)),
+        roll_end: crate::roll_end::roll_end(rec, &tracking),
         success_rate: attribution.as_ref().filter(|a| a.periods > 0).map(|a| a.success_rate),
         worst_window_success_rate: attribution.as_ref().and_then(|a| a.worst_window).map(|w| w.0),
         misses_by_cause: by_cause,
@@ -223,10 +228,6 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         contour: crate::contour_figures::contour_figures(rec, bond_map.as_ref()),
         bond_map,
     }
-}
-
-fn rolling_numbers(rec: &Recording) -> Option<RollingNumbers> {
-    rolling_numbers_of(&tracking_ticks(rec), &crate::strip_rows::RecordedRows::of(rec))
 }
 
 impl crate::strip_rows::CaseRows {
@@ -338,6 +339,9 @@ pub fn format_text(n: &ReportNumbers) -> String {
                 r.z_to_m * 1e3,
                 r.rolled_length_m * 1e3
             );
+            if let Some(e) = n.roll_end.filter(crate::roll_end::RollEnd::is_short) {
+                let _ = writeln!(s, "{}", e.line());
+            }
             let _ = match (r.force_error_max_abs_n, r.force_error_rms_n, r.force_error_mean_n) {
                 (Some(m), Some(rms), Some(mean)) => {
                     writeln!(s, "force err   |bottom| - |ref|: max {m:.3} N, RMS {rms:.3} N, mean {mean:+.3} N (thesis: within 0.45 N)")
