@@ -43,7 +43,8 @@ pub enum PlantStatus {
     Running = 1,
     /// The torque for the previous tick was late, missing or refused; the last good one was held.
     HoldingTorque = 2,
-    /// Too many consecutive misses: the plant applies gravity compensation plus joint damping.
+    /// Too many consecutive misses, a controller fault or lost controller, or a reflex: the
+    /// plant applies its hold (messages/README.md, "The plant's hold").
     SafeStop = 3,
     /// The plant is shutting down; this is the last state it publishes. Controllers should exit.
     ShuttingDown = 4,

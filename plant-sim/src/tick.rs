@@ -18,7 +18,7 @@ use robot::Vec6;
 use scenarios::{Mode, Scenario};
 
 use crate::contact::StripDetail;
-use crate::gate::{Decision, Gate, GateConfig, GateEvents};
+use crate::gate::{ArmNow, Decision, Gate, GateConfig, GateEvents};
 use crate::limits::ReflexLimits;
 use crate::physics::Physics;
 use crate::recording::{StripRecord, TickRecord, TimingRecord};
@@ -97,14 +97,12 @@ impl PlantTick {
     /// waiting for a controller. `mode` is what the states' LOCKSTEP flag says.
     pub fn new(s: &Scenario, physics: Physics, mode: Mode) -> PlantTick {
         let l = &s.loop_;
+        let mass_diag = physics.robot().mass_matrix(&physics.q()).diagonal();
         let gate = Gate::new(GateConfig {
             max_consecutive_misses: l.max_consecutive_misses,
             blend_ticks: (l.takeover_blend_s / l.period_s).round() as u32,
-            safe_stop_damping_nms: crate::gate::safe_stop_damping(
-                l.safe_stop_damping_nms,
-                &physics.robot().mass_matrix(&physics.q()).diagonal(),
-                l.period_s,
-            ),
+            safe_stop_damping_nms: crate::gate::safe_stop_damping(l.safe_stop_damping_nms, &mass_diag, l.period_s),
+            hold_omega_radps: 2.0 * std::f64::consts::PI * l.hold_bandwidth_hz,
             torque_limit_nm: robot::Robot::TORQUE_LIMIT_NM,
         });
         let period_s = l.period_s;
@@ -268,7 +266,14 @@ impl PlantTick {
     pub fn advance(&mut self, torque: Option<&JointTorque>) -> TickOutcome {
         let tick = self.tick;
         let t = self.sim_time_s();
-        let decision = self.gate.decide(torque, &self.physics.gravity_torque(), &self.physics.qd());
+        let physics = &self.physics;
+        let arm = ArmNow {
+            gravity: physics.gravity_torque(),
+            q: physics.q(),
+            qd: physics.qd(),
+            mass_matrix: &|| physics.robot().mass_matrix(&physics.q()),
+        };
+        let decision = self.gate.decide(torque, &arm);
         if decision.events.safe_stop_entered {
             self.first.safe_stop.get_or_insert(tick);
         }
@@ -407,8 +412,9 @@ const ZERO_DIAG: ControllerDiagnostics = ControllerDiagnostics::zeroed(0);
 #[cfg(test)]
 mod tests {
     //! Each gate decision, the reflexes and the stall (misses) of the plant's one core, against
-    //! hand-computed ticks: the blend's straight line (`from + (τ − from) k / N`), the safe
-    //! stop's `g(q) − D q̇`, and a twin [`Physics`] stepped with what the tick says it applied.
+    //! hand-computed ticks: the blend's straight line (`from + (τ − from) k / N`), the position
+    //! hold's `g(q) + K (q_a − q) − D_h q̇`, the compliant stop's `g(q) − D q̇` after a reflex, and a
+    //! twin [`Physics`] stepped with what the tick says it applied.
     use super::*;
     use messages::ControllerStatus;
     use std::path::Path;
@@ -447,16 +453,26 @@ mod tests {
         std::array::from_fn(|i| v[i].to_bits())
     }
 
-    /// The safe stop's torque as the gate's docs state it: `g(q) − D q̇`, with D per joint capped
-    /// at `0.3 M_ii(q₀) / T` for the start pose's mass matrix (the gate fixes it at start).
-    fn safe_stop_torque(s: &Scenario, physics: &Physics) -> Vec6 {
+    /// The start pose's diagonal inertia (the gate fixes its gains from it at start).
+    fn start_mass_diag(s: &Scenario) -> Vec6 {
         let start = twin(s);
-        let d = crate::gate::safe_stop_damping(
-            s.loop_.safe_stop_damping_nms,
-            &start.robot().mass_matrix(&start.q()).diagonal(),
-            s.loop_.period_s,
-        );
-        physics.gravity_torque() - physics.qd().component_mul(&Vec6::from(d))
+        start.robot().mass_matrix(&start.q()).diagonal()
+    }
+
+    /// The compliant hold (waiting for the first answer, after a reflex) as the gate's docs state it: `g(q) − D q̇`, with D per
+    /// joint capped at `0.3 M_ii(q₀) / T`.
+    fn compliant_torque(s: &Scenario, physics: &Physics) -> Vec6 {
+        let m = start_mass_diag(s);
+        let d = Vec6::from_fn(|i, _| s.loop_.safe_stop_damping_nms.min(0.3 * m[i] / s.loop_.period_s));
+        physics.gravity_torque() - physics.qd().component_mul(&d)
+    }
+
+    /// The position hold about `anchor` as the gate's docs state it:
+    /// `g(q) + M(q) (ω² (q_a − q) − 2ω q̇)`, `ω = 2π loop.hold_bandwidth_hz`.
+    fn hold_torque(s: &Scenario, physics: &Physics, anchor: &Vec6) -> Vec6 {
+        let w = 2.0 * std::f64::consts::PI * s.loop_.hold_bandwidth_hz;
+        let m = physics.robot().mass_matrix(&physics.q());
+        physics.gravity_torque() + m * ((anchor - physics.q()) * (w * w) - physics.qd() * (2.0 * w))
     }
 
     /// A small torque on top of gravity compensation: the arm moves, slowly.
@@ -479,13 +495,13 @@ mod tests {
     }
 
     #[test]
-    fn without_a_controller_the_plant_holds_the_safe_stop_torque_and_counts_no_miss() {
+    fn without_a_controller_the_plant_holds_the_compliant_torque_and_counts_no_miss() {
         let s = scenario();
         let mut p = plant(&s);
         let mut t = twin(&s);
         let q0 = p.physics().q();
         for k in 0..100 {
-            let expected = safe_stop_torque(&s, &t);
+            let expected = compliant_torque(&s, &t);
             let o = p.advance(None);
             assert_eq!(bits(&o.decision.tau), bits(&expected), "tick {k}");
             assert!(o.decision.held && !o.decision.missed && o.events.is_empty(), "tick {k}: {:?}", o.decision);
@@ -510,7 +526,8 @@ mod tests {
         let mut t = twin(&s);
         for k in 1..=2 * n {
             let tau = t.gravity_torque() + nudge();
-            let from = safe_stop_torque(&s, &t);
+            // The compliant hold the plant waited in.
+            let from = compliant_torque(&s, &t);
             let answered = p.tick();
             let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Active, tau)));
             let expected = if k <= n { from + (tau - from) * (f64::from(k) / f64::from(n)) } else { tau };
@@ -552,8 +569,13 @@ mod tests {
         let limit = s.loop_.max_consecutive_misses;
         let mut p = running(&s, 60);
         let last = p.gate().last_applied();
+        let mut anchor = None;
         for m in 1..=limit {
             let tick = p.tick();
+            if m == limit {
+                // The hold's anchor: where the arm is on the safe stop's first tick.
+                anchor = Some(p.physics().q());
+            }
             let o = p.advance(None);
             assert!(o.decision.held && o.decision.missed);
             let ev = events(&o);
@@ -570,8 +592,10 @@ mod tests {
                 assert_eq!(p.outputs().0.plant_status, PlantStatus::SafeStop as u32);
             }
         }
-        // In the safe stop the torque is g(q) − D q̇ of each tick's state.
-        let expected = safe_stop_torque(&s, p.physics());
+        // In the safe stop the torque is the hold about the anchor, of each tick's state.
+        let anchor = anchor.unwrap();
+        assert!(p.physics().qd().norm() > 1e-4, "the arm was moving when the stop began");
+        let expected = hold_torque(&s, p.physics(), &anchor);
         let o = p.advance(None);
         assert_eq!(bits(&o.decision.tau), bits(&expected));
         let (state, _) = p.outputs();
@@ -579,11 +603,59 @@ mod tests {
         // The same controller answers again: the safe stop clears, no controller change, and it
         // blends in from the safe stop.
         let tau = p.physics().gravity_torque() + nudge();
-        let from = safe_stop_torque(&s, p.physics());
+        let from = hold_torque(&s, p.physics(), &anchor);
         let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Active, tau)));
         assert_eq!(events(&o), vec![PlantEvent::SafeStopCleared]);
         assert!((o.decision.tau - (from + (tau - from) / 50.0)).norm() < 1e-12);
         assert_eq!(p.outputs().0.consecutive_misses, 0);
+    }
+
+    /// A stalled controller's safe stop, from a swing of the bare arm: per joint the largest
+    /// distance from the anchor after the stop began, the joint speeds at its first tick, and
+    /// where the arm is after `settle` more ticks.
+    fn stop_from_a_swing(s: &Scenario, settle: u32) -> (Vec6, Vec6, Vec6, PlantTick) {
+        let mut p = plant(s);
+        for _ in 0..300 {
+            // The arm's heavy joints pushed (the light wrist only rides along).
+            let tau = p.physics().gravity_torque() + Vec6::new(10.0, -5.0, 2.5, 0.0, 0.0, 0.0);
+            p.advance(Some(&answer(&p, 7, ControllerStatus::Active, tau)));
+        }
+        while p.gate().status() != PlantStatus::SafeStop {
+            p.advance(None);
+        }
+        assert_eq!(p.gate().reflexes(), 0, "a stall's stop, not a reflex's");
+        let anchor = p.gate().hold_anchor().unwrap_or(p.physics().q());
+        let qd0 = p.physics().qd();
+        let mut reach = Vec6::zeros();
+        for _ in 0..settle {
+            p.advance(None);
+            reach = reach.zip_map(&(p.physics().q() - anchor), |r, e| r.max(e.abs()));
+        }
+        (reach, qd0, p.physics().q() - anchor, p)
+    }
+
+    /// The position hold stops a swinging arm joint by joint as a critically damped joint does
+    /// (computed torque cancels the coupling): from speed `v` no farther than `v / (ω e)` from
+    /// the anchor (closed form of `x = v t e^(−ωt)`; the bound has 10 % for the torque held over
+    /// each tick, which adds 4.4-4.7 % on every joint at `ωT` = 0.031), and it settles onto the
+    /// anchor. The compliant hold (`hold_bandwidth_hz` = 0) coasts many times farther, as every
+    /// safe stop did before the position hold.
+    #[test]
+    fn the_position_hold_stops_a_swing_within_the_closed_form_and_settles_on_the_anchor() {
+        let s = scenario();
+        let w = 2.0 * std::f64::consts::PI * s.loop_.hold_bandwidth_hz;
+        let (reach, qd0, offset, p) = stop_from_a_swing(&s, 1000);
+        assert!(qd0.norm() > 0.05, "the arm swung: {qd0}");
+        for i in 0..6 {
+            let bound = qd0[i].abs() / (w * std::f64::consts::E);
+            assert!(reach[i] <= 1.1 * bound + 1e-9, "joint {}: {} rad from the anchor, closed form {bound}", i + 1, reach[i]);
+        }
+        assert!(offset.norm() < 1e-6, "settled {offset} from the anchor after 1 s");
+        assert!(p.physics().qd().norm() < 1e-6);
+        let mut compliant = scenario();
+        compliant.loop_.hold_bandwidth_hz = 0.0;
+        let (coast, _, _, _) = stop_from_a_swing(&compliant, 1000);
+        assert!(coast.norm() > 5.0 * reach.norm(), "compliant {coast} vs hold {reach}");
     }
 
     #[test]
@@ -613,7 +685,8 @@ mod tests {
     fn a_controller_fault_is_a_safe_stop_not_a_miss() {
         let s = scenario();
         let mut p = running(&s, 60);
-        let expected = safe_stop_torque(&s, p.physics());
+        // The hold's first tick: anchored where the arm is, so only its damping acts.
+        let expected = hold_torque(&s, p.physics(), &p.physics().q());
         let tick = p.tick();
         let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Fault, nudge())));
         assert_eq!(events(&o), vec![PlantEvent::SafeStop(SafeStopCause::ControllerFault)]);
@@ -642,6 +715,7 @@ mod tests {
         s.safety.max_tcp_speed_mps = 1e-3;
         let mut p = plant(&s);
         let mut reflex_tick = None;
+        let mut compliant_before = compliant_torque(&s, p.physics());
         for _ in 0..2000 {
             let tau = p.physics().gravity_torque() + nudge() * 5.0;
             let o = p.advance(Some(&answer(&p, 7, ControllerStatus::Active, tau)));
@@ -654,9 +728,14 @@ mod tests {
                 }
             } else {
                 assert_eq!(reflexes, 0, "a latched reflex is raised once");
-                // Answered but not acknowledged: the safe stop's torque, not the answer.
+                // Answered but not acknowledged: the compliant stop's torque, not the answer
+                // (no position hold: the arm gives way, relieving what tripped the reflex).
                 assert!(o.decision.held && !o.decision.missed);
+                assert_eq!(bits(&o.decision.tau), bits(&compliant_before), "tick {}", p.tick());
+                assert_eq!(p.gate().hold_anchor(), None);
             }
+            let compliant_before_next = compliant_torque(&s, p.physics());
+            compliant_before = compliant_before_next;
             if reflex_tick.is_some_and(|t| p.tick() > t + 5) {
                 break;
             }

@@ -85,10 +85,10 @@ impl PlantEvent {
                 write!(s, "tick {tick}: safe stop requested by the controller (fault)")
             }
             PlantEvent::SafeStop(SafeStopCause::Misses(n)) => {
-                write!(s, "tick {tick}: safe stop after {n} consecutive misses (gravity compensation + joint damping)")
+                write!(s, "tick {tick}: safe stop after {n} consecutive misses (the plant's hold)")
             }
             PlantEvent::SafeStop(SafeStopCause::ControllerGone) => {
-                write!(s, "tick {tick}: safe stop: the controller is gone (gravity compensation + joint damping)")
+                write!(s, "tick {tick}: safe stop: the controller is gone (the plant's hold)")
             }
             PlantEvent::SafeStopCleared => write!(s, "tick {tick}: safe stop cleared, controller resumes (blended in)"),
             PlantEvent::ControllerChange { old: Some(old), new } => {

@@ -286,8 +286,12 @@ pub struct LoopConfig {
     pub substeps: u32,
     /// Robot integrator per substep: "midpoint" (default) or "rk4".
     pub integrator: Integrator,
-    /// Safe stop joint damping, N m s/rad.
+    /// Joint damping of the compliant hold (before the first answer, after a reflex: gravity
+    /// compensation plus this damping), N m s/rad.
     pub safe_stop_damping_nms: f64,
+    /// Bandwidth of the plant's position hold (every safe stop but a reflex's), Hz: each joint
+    /// critically damped at it; 0 = a compliant hold.
+    pub hold_bandwidth_hz: f64,
     /// How long the torque is blended from the held value to a new controller's value, s.
     pub takeover_blend_s: f64,
     /// Consecutive missed ticks of the active controller after which another controller that is
@@ -327,6 +331,7 @@ impl Default for LoopConfig {
             substeps: 8,
             integrator: Integrator::Midpoint,
             safe_stop_damping_nms: 20.0,
+            hold_bandwidth_hz: 5.0,
             takeover_blend_s: 0.05,
             takeover_after_misses: 3,
             peer_stall_timeout_s: 5.0,
