@@ -117,6 +117,41 @@ fn servo_run_allocates_nothing(name: &str, ticks: Option<u64>) {
     assert_eq!(controller_allocations, 0, "{controller_allocations} heap allocations in Controller::process over {counted} ticks");
 }
 
+/// A stalled controller mid-roll: the misses, the safe stop's position hold (computed torque with
+/// the plant's mass matrix), the controller's return and its blend from the hold allocate nothing.
+#[test]
+fn a_stall_s_safe_stop_hold_and_take_over_do_not_allocate() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/default.toml");
+    let s = Scenario::load(&path).unwrap();
+    let mut plant = PlantTick::from_scenario(&s, &strip::cache::cache_dir(), Mode::Lockstep).unwrap();
+    let mut controller = Controller::from_scenario(&s).with_id(1);
+    let mut step = |plant: &mut PlantTick, answer: bool| {
+        let a0 = allocations();
+        let (state, wrench) = plant.outputs();
+        let torque = answer.then(|| controller.process(&state, &wrench).0);
+        let a1 = allocations();
+        let outcome = plant.advance(torque.as_ref());
+        std::hint::black_box(&outcome);
+        (allocations() - a1, state.flags & state_flags::IN_CONTACT != 0, a1 - a0)
+    };
+    // Into the roll, pressing (and the first of everything: events' texts, lazy statics).
+    while plant.tick() < 2000 {
+        step(&mut plant, true);
+    }
+    let (mut plant_allocations, mut in_contact) = (0, 0);
+    for k in 0..700 {
+        // 500 ticks without an answer (20 misses, then the hold), then 200 answered (the blend).
+        let (a, contact, _) = step(&mut plant, k >= 500);
+        plant_allocations += a;
+        in_contact += u32::from(contact);
+    }
+    assert!(plant.first_ticks().safe_stop.is_some_and(|t| t >= 2000), "the stall safe-stopped");
+    assert_eq!(plant.gate().status(), messages::PlantStatus::Running, "and the controller came back");
+    assert!(plant.gate().hold_anchor().is_some(), "the stop was a position hold");
+    assert!(in_contact >= 650, "pressing through the hold: {in_contact} of 700 ticks in contact");
+    assert_eq!(plant_allocations, 0, "{plant_allocations} heap allocations in PlantTick::outputs/advance over the stall");
+}
+
 #[test]
 fn handing_every_tick_to_the_recorder_does_not_allocate() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/default.toml");
