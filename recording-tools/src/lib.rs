@@ -11,6 +11,7 @@
 //!   kept in memory (a sweep or study case that writes no file).
 //! - [`bond_map`] is a long seal's bond map: the peak pressure at each millimetre of the strip.
 //! - [`roll_end`] says where the roll's reference ended against its plan, and why.
+//! - [`stop_holds`] says what each safe stop did to the wheel (how far it went, how hard it pressed).
 //! - [`contour_figures`] are a contour run's figures per segment (force, lateral, heading, bond).
 //! - [`compare`] puts several recordings side by side.
 //! - [`replay`] drives a controller open-loop from a recording and compares its torques.
@@ -28,6 +29,7 @@ pub mod read;
 pub mod replay;
 pub mod report;
 pub mod roll_end;
+pub mod stop_holds;
 pub mod strip_rows;
 pub mod tmpfs_test;
 pub mod tracking;

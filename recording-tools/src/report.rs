@@ -114,6 +114,8 @@ pub struct ReportNumbers {
     /// Where the roll's reference ended against the scenario's plan (None without a recorded
     /// scenario or controller reference).
     pub roll_end: Option<crate::roll_end::RollEnd>,
+    /// What each safe stop did to the wheel (recordings with `/strip` rows).
+    pub stop_holds: Vec<crate::stop_holds::StopHold>,
     /// Real-time recordings: the control success rate (ticks answered in budget over periods),
     /// its worst 100-period window, and the misses per cause ([`crate::attribution`]).
     pub success_rate: Option<f64>,
@@ -219,6 +221,7 @@ pub fn numbers(rec: &Recording) -> ReportNumbers {
         plant_compute_us: Percentiles::of(plant),
         rolling: rolling_numbers_of(&tracking, &crate::strip_rows::RecordedRows::of(rec)),
         roll_end: crate::roll_end::roll_end(rec, &tracking),
+        stop_holds: crate::stop_holds::stop_holds(rec),
         success_rate: attribution.as_ref().filter(|a| a.periods > 0).map(|a| a.success_rate),
         worst_window_success_rate: attribution.as_ref().and_then(|a| a.worst_window).map(|w| w.0),
         misses_by_cause: by_cause,
@@ -306,6 +309,9 @@ pub fn format_text(n: &ReportNumbers) -> String {
     }
     let _ = writeln!(s, "misses      {}", n.misses);
     let _ = writeln!(s, "safe stops  {}", n.safe_stops);
+    for h in n.stop_holds.iter().take(crate::stop_holds::STOPS_LISTED) {
+        let _ = writeln!(s, "{}", h.line(n.period_s));
+    }
     let _ = writeln!(s, "dropped     {}{}", n.dropped, if n.dropped > 0 { "  (RECORDING INCOMPLETE)" } else { "" });
     let _ = writeln!(s, "events      {}", n.events);
     for e in &n.event_list {

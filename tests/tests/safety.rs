@@ -866,6 +866,21 @@ fn a_roll_cut_short_by_a_stalled_controller_says_how_short_and_why() {
         format!("the hold let the wheel go {reach} m from where the stop began (closed form {bound} m)")
     });
     c.check(weakest > 1.0, || format!("the wheel stays on the strip through the hold: weakest press {weakest} N"));
+    // The summary says the same of the stop (`recording_tools::stop_holds`).
+    let holds = recording_tools::stop_holds::stop_holds(&rec);
+    eprintln!("{holds:?}");
+    c.check(holds.len() == 1, || format!("one safe stop, one stop hold: {holds:?}"));
+    if let Some(h) = holds.first() {
+        c.check(run.daemon.stdout().contains(&h.line(rec.period_s())), || {
+            format!("the summary prints the stop hold's line: {}", run.logs())
+        });
+        // Measured from the same row (the tick before the first state in safe stop is the safe
+        // stop event's); the ticks it spans may differ from this test's by one at either end.
+        c.check((h.wheel_reach_m - reach).abs() <= 50e-6, || format!("the stop hold's reach {} m against {reach} m", h.wheel_reach_m));
+        c.check((h.weakest_press_n - weakest).abs() <= 0.05, || {
+            format!("the stop hold's press {} N against {weakest} N", h.weakest_press_n)
+        });
+    }
     c.done();
 }
 
