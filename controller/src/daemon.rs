@@ -116,14 +116,29 @@ pub fn run(cfg: &DaemonConfig) -> anyhow::Result<DaemonSummary> {
     // machine): its own torque watchdog is the first measure there. The watcher sets up its node
     // while this thread opens the ports and builds the controller (before the real-time set-up,
     // so it keeps the normal scheduling policy).
+    let t_setup = Instant::now();
     let watch = rig_process::liveness::PeerWatch::start(&cfg.rig, "controller-watch", rig_process::liveness::Watched::Plant)
         .with_context(|| format!("controller for rig {:?}", cfg.rig))?;
     let ports = ControllerPorts::open(&cfg.rig, "controller").with_context(|| format!("controller for rig {:?}", cfg.rig))?;
+    let t_ports = t_setup.elapsed();
     let mut controller =
         Controller::from_scenario(s).with_id(controller_id(std::process::id())).with_contract_version(cfg.contract_version);
+    let t_model = t_setup.elapsed() - t_ports;
     let watch = watch.ready().with_context(|| format!("controller for rig {:?}", cfg.rig))?;
+    let t_watch = t_setup.elapsed() - t_ports - t_model;
     setup_realtime(cfg.rt_priority);
-    tracing::info!(rig = %cfg.rig, contract_version = cfg.contract_version, "controller waiting for the plant");
+    // The start-up's parts (README, "Lockstep start-up"): the iceoryx2 ports (beside the liveness
+    // watch's node), the control law's model, the rest of the watch's wait, the real-time set-up.
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    tracing::info!(
+        rig = %cfg.rig,
+        contract_version = cfg.contract_version,
+        ports_ms = ms(t_ports),
+        model_ms = ms(t_model),
+        watch_ms = ms(t_watch),
+        setup_ms = ms(t_setup.elapsed()),
+        "controller waiting for the plant"
+    );
 
     let started = Instant::now();
     let mut last_state_at: Option<Instant> = None;

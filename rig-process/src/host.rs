@@ -130,13 +130,18 @@ pub fn config_path() -> PathBuf {
 
 /// Create `dir` (mode 0700) or check that it is a directory of ours that nobody else can enter.
 fn private_dir(dir: &Path) -> Result<(), HostError> {
-    let uid = euid();
     if dir.as_os_str().len() > MAX_STATE_DIR_LEN {
         return Err(shm_error(format!(
             "the rig's state directory {} is longer than {MAX_STATE_DIR_LEN} bytes, too long for iceoryx2's socket paths: set {STATE_DIR_ENV} to a shorter one",
             dir.display()
         )));
     }
+    private_dir_as(dir, "the rig's state directory")
+}
+
+/// [`private_dir`] without the length check, `what` naming the directory in its messages.
+fn private_dir_as(dir: &Path, what: &str) -> Result<(), HostError> {
+    let uid = euid();
     if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty() && !p.exists()) {
         std::fs::DirBuilder::new().recursive(true).mode(0o700).create(parent).map_err(|e| {
             shm_error_from(
@@ -150,10 +155,7 @@ fn private_dir(dir: &Path) -> Result<(), HostError> {
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
         Err(e) => {
             return Err(shm_error_from(
-                format!(
-                    "cannot create the rig's state directory {}; make its parent writable or set {STATE_DIR_ENV} to a directory of yours",
-                    dir.display()
-                ),
+                format!("cannot create {what} {}; make its parent writable or set {STATE_DIR_ENV} to a directory of yours", dir.display()),
                 e,
             ))
         }
@@ -161,7 +163,7 @@ fn private_dir(dir: &Path) -> Result<(), HostError> {
     let m = std::fs::symlink_metadata(dir).map_err(|e| shm_error_from(format!("cannot inspect {}", dir.display()), e))?;
     if !m.is_dir() || m.uid() != uid {
         return Err(shm_error(format!(
-            "the rig's state directory {} is not a directory owned by you (uid {uid}; it belongs to uid {}): if another user created it first, remove it; or set {STATE_DIR_ENV} to a directory of yours",
+            "{what} {} is not a directory owned by you (uid {uid}; it belongs to uid {}): if another user created it first, remove it; or set {STATE_DIR_ENV} to a directory of yours",
             dir.display(),
             m.uid()
         )));
@@ -173,6 +175,36 @@ fn private_dir(dir: &Path) -> Result<(), HostError> {
     Ok(())
 }
 
+/// Where iceoryx2 keeps a rig's node, service and socket files: `<state dir>/iox2` when the state
+/// directory is on a tmpfs (as `/run` is on most hosts), else `/dev/shm/<prefix>iox2`, an
+/// owner-only directory named with the configuration's random prefix. iceoryx2 creates, syncs and
+/// removes a few dozen files there per run: on an ext4 mounted with `discard` (this project's CI
+/// VM has `/run` there) the ports of each daemon took 15-36 ms to open against 4-12 ms on a tmpfs
+/// (2026-12-07, README "Lockstep start-up").
+fn iceoryx2_root(state_dir: &Path, prefix: &str) -> PathBuf {
+    if is_tmpfs(state_dir) {
+        state_dir.join("iox2")
+    } else {
+        Path::new(SHM_DIR).join(format!("{prefix}iox2"))
+    }
+}
+
+/// True if `dir` is on a tmpfs (false if it cannot be inspected).
+fn is_tmpfs(dir: &Path) -> bool {
+    let Ok(c) = std::ffi::CString::new(dir.as_os_str().as_encoded_bytes()) else { return false };
+    // SAFETY: statfs fills the zeroed struct we own; c is a valid C string.
+    let mut st: libc::statfs = unsafe { std::mem::zeroed() };
+    // SAFETY: as above.
+    unsafe { libc::statfs(c.as_ptr(), &mut st) == 0 && st.f_type == libc::TMPFS_MAGIC }
+}
+
+/// The root path a configuration's text names (`root-path = "..."`), without its trailing slash.
+fn root_path_of(config_text: &str) -> Option<PathBuf> {
+    let line = config_text.lines().find(|l| l.starts_with("root-path"))?;
+    let value = line.split_once('=')?.1.trim().trim_matches('"');
+    Some(PathBuf::from(value.trim_end_matches('/')))
+}
+
 /// The template with this user's root path and a fresh random prefix.
 fn effective_config_text(dir: &Path) -> Result<String, HostError> {
     let mut random = [0u8; 6];
@@ -180,13 +212,14 @@ fn effective_config_text(dir: &Path) -> Result<String, HostError> {
         .and_then(|mut f| f.read_exact(&mut random))
         .map_err(|e| shm_error_from("cannot read /dev/urandom for the rig's iceoryx2 prefix".into(), e))?;
     let hex: String = random.iter().map(|b| format!("{b:02x}")).collect();
-    let root = dir.join("iox2");
+    let prefix = format!("rig{}_{hex}_", euid());
+    let root = iceoryx2_root(dir, &prefix);
     let mut out = String::from("# Written by the rig from messages/iceoryx2.toml for this user; load it, do not edit it.\n");
     for line in CONFIG_TEMPLATE.lines() {
         if line.starts_with("root-path") {
             out += &format!("root-path = \"{}/\"\n", root.display());
         } else if line.starts_with("prefix") {
-            out += &format!("prefix = \"rig{}_{hex}_\"\n", euid());
+            out += &format!("prefix = \"{prefix}\"\n");
         } else {
             out += line;
             out.push('\n');
@@ -236,6 +269,11 @@ pub fn iceoryx2_config() -> Result<&'static Config, HostError> {
             private_dir(&dir)?;
             let path = ensure_config_file(&dir)?;
             let wanted = std::fs::read_to_string(&path).map_err(|e| shm_error_from(format!("cannot read {}", path.display()), e))?;
+            // A root path outside the state directory (on /dev/shm) is made, or checked, owner-only
+            // before iceoryx2 uses it; it goes when the host reboots while the configuration stays.
+            if let Some(root) = root_path_of(&wanted).filter(|r| !r.starts_with(&dir)) {
+                private_dir_as(&root, "the rig's iceoryx2 directory")?;
+            }
             let fp = FilePath::new(path.as_os_str().as_encoded_bytes()).map_err(|e| {
                 shm_error_from(format!("{} is not a path iceoryx2 accepts; set {STATE_DIR_ENV} to a shorter one", path.display()), e)
             })?;
@@ -297,11 +335,11 @@ fn check_shared_memory_at(dir: &Path) -> Result<(), HostError> {
     Ok(())
 }
 
-/// Everything a daemon checks before its first node: the configuration, then shared memory.
+/// Everything a daemon checks before its first node: shared memory, then the configuration
+/// (which may put iceoryx2's directory on `/dev/shm`, so a full or read-only one is said first).
 pub fn prepare() -> Result<&'static Config, HostError> {
-    let cfg = iceoryx2_config()?;
     check_shared_memory()?;
-    Ok(cfg)
+    iceoryx2_config()
 }
 
 /// iceoryx2 creates its global management segment (`*.global_mgmt` in [`SHM_DIR`]) world-writable
@@ -537,9 +575,18 @@ mod tests {
 
     #[test]
     fn the_effective_config_keeps_the_template_and_fills_in_root_and_prefix() {
-        let t = effective_config_text(Path::new("/x/y")).unwrap();
-        assert!(t.contains("root-path = \"/x/y/iox2/\""), "{t}");
+        // /dev/shm is a tmpfs (check_shared_memory's premise): the root stays in the state directory
+        let on_tmpfs = Path::new(SHM_DIR);
+        let t = effective_config_text(on_tmpfs).unwrap();
+        assert!(t.contains("root-path = \"/dev/shm/iox2/\""), "{t}");
         assert!(t.contains(&format!("prefix = \"rig{}_", euid())), "{t}");
         assert_eq!(t.lines().filter(|l| l.starts_with("prefix")).count(), 1);
+        // /proc is never a tmpfs: the root moves to /dev/shm, named with the prefix
+        let t = effective_config_text(Path::new("/proc")).unwrap();
+        let prefix = t.lines().find(|l| l.starts_with("prefix")).unwrap().split('"').nth(1).unwrap().to_string();
+        assert_eq!(prefix.len(), format!("rig{}_", euid()).len() + 13, "{t}");
+        assert_eq!(root_path_of(&t).unwrap(), Path::new(&format!("/dev/shm/{prefix}iox2")), "{t}");
+        // iceoryx2's socket paths still fit (MAX_STATE_DIR_LEN's budget: the state dir + "/iox2")
+        assert!(root_path_of(&t).unwrap().as_os_str().len() <= MAX_STATE_DIR_LEN + 5);
     }
 }
