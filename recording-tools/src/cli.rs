@@ -80,6 +80,23 @@ pub fn summary_numbers(path: &Path) -> anyhow::Result<ReportNumbers> {
     Ok(report::numbers(&rec))
 }
 
+/// [`summary_numbers`] of a recording a plant of rig `rig` is still writing, read as it grows
+/// ([`Recording::follow_channels`]): the same numbers and verdict once `progress` says the file is
+/// finished, most of the reading done by then. None if `progress` abandoned it.
+pub fn summary_numbers_following(
+    path: &Path,
+    rig: &str,
+    progress: &dyn Fn() -> crate::read::Writing,
+) -> Option<anyhow::Result<ReportNumbers>> {
+    let rec = Recording::follow_channels(path, report::NUMBERS_CHANNELS, rig, FOLLOW_POLL, progress)?;
+    Some(rec.map(|rec| report::numbers(&rec)).map_err(Into::into))
+}
+
+/// How often a followed recording is looked at for new bytes: a few chunks of a lockstep run
+/// (512 KiB uncompressed each, about 3 ms of its loop apiece), and a read that finds nothing
+/// costs a system call.
+const FOLLOW_POLL: std::time::Duration = std::time::Duration::from_millis(5);
+
 pub fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     replay::run(&args).map(|_| ())
 }

@@ -198,6 +198,148 @@ enum Stop {
     Bad(String),
 }
 
+/// How much of a followed file is walked before it is known to be the rig's: its header, schemas,
+/// channels and run metadata (with the scenario's text) come first, within a few kB.
+const FOLLOW_PROBE_BYTES: usize = 1 << 20;
+
+/// Whether the writer of a followed recording ([`Recording::follow_channels`]) is still at it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Writing {
+    /// The file may still grow.
+    Running,
+    /// The file is finished (or its writer gone): read the rest and judge it.
+    Finished,
+    /// Nobody wants the result any more.
+    Abandoned,
+}
+
+/// Where a walk of a recording's records stands: what it read and where it goes on.
+struct Walk {
+    rec: Recording,
+    links: Links,
+    /// The next record's byte.
+    at: usize,
+    /// Chunks read so far.
+    chunk: usize,
+    /// The chunk the walk is in when it stops, if it stops at one.
+    in_chunk: Option<usize>,
+    saw_data_end: bool,
+}
+
+/// How far a walk over the bytes so far got.
+enum Step {
+    /// The bytes end inside or after a record, and more may come.
+    More,
+    /// The walk is over: at the data end (None) or at damage.
+    Stopped(Option<Stop>),
+}
+
+/// The records of a chunk: decompressed and verified here, or ahead on a second thread.
+trait ChunkSource {
+    /// The records of the chunk record at byte `at` (body `body`), or why it is bad.
+    fn chunk(&mut self, at: usize, body: &[u8]) -> Result<&[u8], String>;
+}
+
+impl ChunkSource for Unpacker {
+    fn chunk(&mut self, _at: usize, body: &[u8]) -> Result<&[u8], String> {
+        self.verified_chunk(body)
+    }
+}
+
+impl ChunkSource for Ahead {
+    fn chunk(&mut self, at: usize, body: &[u8]) -> Result<&[u8], String> {
+        Ahead::chunk(self, at, body)
+    }
+}
+
+impl Walk {
+    fn new(path: &Path, wanted: Channels) -> Self {
+        Walk {
+            rec: Recording { path: path.into(), ..Default::default() },
+            links: Links { wanted, ..Default::default() },
+            at: MCAP_MAGIC.len(),
+            chunk: 0,
+            in_chunk: None,
+            saw_data_end: false,
+        }
+    }
+
+    /// Walks on over `bytes` (the file from its start, as far as it is known). `growing`: the
+    /// file may still grow, so bytes that end inside a record say [`Step::More`] (the walk stays
+    /// before that record) rather than a cut.
+    fn on(&mut self, path: &Path, bytes: &[u8], chunks: &mut impl ChunkSource, growing: bool) -> Result<Step, ReadError> {
+        loop {
+            self.in_chunk = (bytes.get(self.at) == Some(&op::CHUNK)).then_some(self.chunk);
+            let (opcode, body, next) = match record_at(bytes, self.at) {
+                Ok(Some(r)) => r,
+                Ok(None) | Err(_) if growing => return Ok(Step::More),
+                Ok(None) => return Ok(Step::Stopped(Some(Stop::Short("the file ends there, without a data-end record".into())))),
+                Err(why) => return Ok(Step::Stopped(Some(Stop::Short(why)))),
+            };
+            match opcode {
+                op::CHUNK => {
+                    match chunks.chunk(self.at, body) {
+                        Ok(records) => self.rec.read_records(path, records, &mut self.links)?,
+                        Err(why) => return Ok(Step::Stopped(Some(Stop::Bad(why)))),
+                    }
+                    self.chunk += 1;
+                }
+                op::DATA_END => {
+                    self.saw_data_end = true;
+                    let saved = body.get(..4).map_or(0, |b| u32::from_le_bytes(b.try_into().unwrap()));
+                    let computed = crc32fast::hash(&bytes[..self.at]);
+                    if saved != 0 && saved != computed {
+                        return Ok(Step::Stopped(Some(Stop::Bad(format!(
+                            "the data section fails its CRC (stored {saved:08x}, computed {computed:08x}): a record outside the chunks is damaged, every chunk passed its CRC"
+                        )))));
+                    }
+                    return Ok(Step::Stopped(None));
+                }
+                op::FOOTER => return Ok(Step::Stopped(Some(Stop::Bad("a footer comes before the data-end record".into())))),
+                op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
+                    if let Err(why) = self.rec.read_record(path, opcode, body, &mut self.links)? {
+                        return Ok(Step::Stopped(Some(Stop::Bad(why))));
+                    }
+                }
+                _ => {}
+            }
+            self.at = next;
+        }
+    }
+
+    /// The recording read, judged from where the walk stopped and how the whole file ends.
+    fn finish(self, path: &Path, bytes: &[u8], stop: Option<Stop>) -> Result<Recording, ReadError> {
+        let Walk { mut rec, at, in_chunk, saw_data_end, .. } = self;
+        let complete = bytes.len() >= MCAP_MAGIC.len() + FOOTER_TAIL
+            && bytes.ends_with(MCAP_MAGIC)
+            && bytes[bytes.len() - FOOTER_TAIL] == op::FOOTER
+            && bytes[bytes.len() - FOOTER_TAIL + 1..][..8] == 20u64.to_le_bytes();
+        let first_tick_lost = (!saw_data_end).then(|| rec.joint_state.last().map_or(0, |s| s.tick + 1));
+        let damage = |reason: String| Damage { chunk: in_chunk, offset: at as u64, first_tick_lost, reason };
+        rec.integrity = match stop {
+            Some(Stop::Short(why)) if !complete => Integrity::Cut(damage(why)),
+            Some(Stop::Short(why)) => Integrity::Corrupt(damage(format!("{why}, yet the file ends with a footer"))),
+            Some(Stop::Bad(why)) if !complete => Integrity::Corrupt(damage(format!("{why} (the file has no footer either)"))),
+            Some(Stop::Bad(why)) => Integrity::Corrupt(damage(why)),
+            None if !complete => Integrity::Cut(Damage {
+                chunk: None,
+                offset: at as u64,
+                first_tick_lost: None,
+                reason: "the summary or footer after the data-end record is missing or cut".into(),
+            }),
+            None => match rec.summary_metadata("stopped_early").filter(|s| !s.is_empty()) {
+                Some(why) => Integrity::StoppedEarly(why.to_string()),
+                None => Integrity::Complete,
+            },
+        };
+        if !rec.metadata.contains_key(RECORD_NAME) && rec.joint_state.is_empty() && rec.integrity == Integrity::Complete {
+            let first = Channel::JointState.def();
+            return Err(ReadError::Foreign { path: path.into(), topic: first.topic, schema: first.schema_name });
+        }
+        Ok(rec)
+    }
+}
+
 impl Recording {
     /// Reads a recording; a cut or corrupt file yields the ticks before the damage and says where
     /// in `integrity`.
@@ -247,82 +389,92 @@ impl Recording {
         if !bytes.starts_with(MCAP_MAGIC) {
             return Err(ReadError::NotMcap { path: path.into(), start: bytes[..bytes.len().min(8)].to_vec() });
         }
-        let mut rec = Recording { path: path.into(), ..Default::default() };
-        let mut links = Links { wanted, ..Default::default() };
+        let mut walk = Walk::new(path, wanted);
         // The chunks are decompressed and checked ahead, on a second thread, while this one
         // decodes the chunk before (`Ahead`).
-        let walked = std::thread::scope(|scope| -> Result<_, ReadError> {
+        let stop = std::thread::scope(|scope| -> Result<_, ReadError> {
             let mut ahead = Ahead::start(scope, bytes);
-            let mut at = MCAP_MAGIC.len();
-            let mut chunk = 0usize;
-            let mut in_chunk;
-            let mut saw_data_end = false;
-            let stop = loop {
-                in_chunk = (bytes.get(at) == Some(&op::CHUNK)).then_some(chunk);
-                let (opcode, body, next) = match record_at(bytes, at) {
-                    Ok(Some(r)) => r,
-                    Ok(None) => break Some(Stop::Short("the file ends there, without a data-end record".into())),
-                    Err(why) => break Some(Stop::Short(why)),
-                };
-                match opcode {
-                    op::CHUNK => {
-                        match ahead.chunk(at, body) {
-                            Ok(records) => rec.read_records(path, records, &mut links)?,
-                            Err(why) => break Some(Stop::Bad(why)),
-                        }
-                        chunk += 1;
-                    }
-                    op::DATA_END => {
-                        saw_data_end = true;
-                        let saved = body.get(..4).map_or(0, |b| u32::from_le_bytes(b.try_into().unwrap()));
-                        let computed = crc32fast::hash(&bytes[..at]);
-                        if saved != 0 && saved != computed {
-                            break Some(Stop::Bad(format!(
-                            "the data section fails its CRC (stored {saved:08x}, computed {computed:08x}): a record outside the chunks is damaged, every chunk passed its CRC"
-                        )));
-                        }
-                        break None;
-                    }
-                    op::FOOTER => break Some(Stop::Bad("a footer comes before the data-end record".into())),
-                    op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
-                        if let Err(why) = rec.read_record(path, opcode, body, &mut links)? {
-                            break Some(Stop::Bad(why));
-                        }
-                    }
-                    _ => {}
-                }
-                at = next;
-            };
-            Ok((stop, at, in_chunk, saw_data_end))
+            match walk.on(path, bytes, &mut ahead, false)? {
+                Step::Stopped(stop) => Ok(stop),
+                Step::More => unreachable!("a walk of the whole file stops"),
+            }
         })?;
-        let (stop, at, in_chunk, saw_data_end) = walked;
-        let complete = bytes.len() >= MCAP_MAGIC.len() + FOOTER_TAIL
-            && bytes.ends_with(MCAP_MAGIC)
-            && bytes[bytes.len() - FOOTER_TAIL] == op::FOOTER
-            && bytes[bytes.len() - FOOTER_TAIL + 1..][..8] == 20u64.to_le_bytes();
-        let first_tick_lost = (!saw_data_end).then(|| rec.joint_state.last().map_or(0, |s| s.tick + 1));
-        let damage = |reason: String| Damage { chunk: in_chunk, offset: at as u64, first_tick_lost, reason };
-        rec.integrity = match stop {
-            Some(Stop::Short(why)) if !complete => Integrity::Cut(damage(why)),
-            Some(Stop::Short(why)) => Integrity::Corrupt(damage(format!("{why}, yet the file ends with a footer"))),
-            Some(Stop::Bad(why)) if !complete => Integrity::Corrupt(damage(format!("{why} (the file has no footer either)"))),
-            Some(Stop::Bad(why)) => Integrity::Corrupt(damage(why)),
-            None if !complete => Integrity::Cut(Damage {
-                chunk: None,
-                offset: at as u64,
-                first_tick_lost: None,
-                reason: "the summary or footer after the data-end record is missing or cut".into(),
-            }),
-            None => match rec.summary_metadata("stopped_early").filter(|s| !s.is_empty()) {
-                Some(why) => Integrity::StoppedEarly(why.to_string()),
-                None => Integrity::Complete,
-            },
-        };
-        if !rec.metadata.contains_key(RECORD_NAME) && rec.joint_state.is_empty() && rec.integrity == Integrity::Complete {
-            let first = Channel::JointState.def();
-            return Err(ReadError::Foreign { path: path.into(), topic: first.topic, schema: first.schema_name });
+        walk.finish(path, bytes, stop)
+    }
+
+    /// Reads the recording at `path` while a plant still writes it, so that little is left to
+    /// read when it is finished (`rig run`'s summary: the sunroof's 24 MB took 0.15 s to read
+    /// after the run, 2026-12-07). Follows the file as it grows, decoding each chunk once whole;
+    /// `progress` says whether the writer is still at it. A file whose run metadata names another
+    /// rig than `rig` (the last run's at the same path, before the plant truncates it) is read
+    /// again from the start once it does. Once `progress` says [`Writing::Finished`] the rest is
+    /// read and judged exactly as [`open_channels`](Self::open_channels) would judge the whole
+    /// file; [`Writing::Abandoned`] ends the follow with None. Polls every `poll`.
+    pub fn follow_channels(
+        path: &Path,
+        wanted: Channels,
+        rig: &str,
+        poll: std::time::Duration,
+        progress: &dyn Fn() -> Writing,
+    ) -> Option<Result<Self, ReadError>> {
+        let mut bytes: Vec<u8> = Vec::new();
+        let mut file: Option<std::fs::File> = None;
+        let mut walk = Walk::new(path, wanted);
+        let mut unpack = Unpacker::default();
+        // Whether the file is this rig's: its run metadata came and names `rig`.
+        let mut ours = false;
+        loop {
+            // Read before reading the file: what was written by then is in the file.
+            let writing = progress();
+            if writing == Writing::Abandoned {
+                return None;
+            }
+            if file.is_none() {
+                file = std::fs::File::open(path).ok().filter(|f| f.metadata().is_ok_and(|m| m.is_file()));
+            }
+            if let Some(f) = file.as_mut() {
+                use std::io::Read;
+                if let Err(e) = f.read_to_end(&mut bytes) {
+                    return Some(Err(ReadError::Io { path: path.into(), cause: e }));
+                }
+            }
+            let finished = writing == Writing::Finished;
+            if !ours && !finished {
+                // Not yet known to be this rig's: walk on as far as the file goes, and start
+                // over whenever it turns out to be another's (or not an MCAP file yet).
+                // (The start only: the run metadata comes before the first message.)
+                let start = &bytes[..bytes.len().min(FOLLOW_PROBE_BYTES)];
+                let walked = bytes.starts_with(MCAP_MAGIC).then(|| walk.on(path, start, &mut unpack, true));
+                let meta_rig = walk.rec.metadata.get(RECORD_NAME).map(|m| m.get("rig").map(String::as_str) == Some(rig));
+                match (walked, meta_rig) {
+                    (Some(Ok(_)), Some(true)) => ours = true,
+                    (Some(Ok(Step::More)), None) => {}
+                    (None, _) if bytes.len() < MCAP_MAGIC.len() && !bytes.is_empty() => {}
+                    _ => {
+                        // another run's file, or not an MCAP file (yet): again from the start
+                        (bytes, file, walk) = (Vec::new(), None, Walk::new(path, wanted));
+                    }
+                }
+            } else if !finished {
+                if let Err(e) = walk.on(path, &bytes, &mut unpack, true) {
+                    return Some(Err(e));
+                }
+            }
+            if finished {
+                // The whole file: judged as a read of it after the run would judge it (a file
+                // never found to be ours is read that way too).
+                if !ours {
+                    return Some(Self::open_channels(path, wanted));
+                }
+                let stop = match walk.on(path, &bytes, &mut unpack, false) {
+                    Ok(Step::Stopped(stop)) => stop,
+                    Ok(Step::More) => unreachable!("a walk of the whole file stops"),
+                    Err(e) => return Some(Err(e)),
+                };
+                return Some(walk.finish(path, &bytes, stop));
+            }
+            std::thread::sleep(poll);
         }
-        Ok(rec)
     }
 
     /// Reads the records of a verified chunk.

@@ -85,6 +85,36 @@ fn short_realtime_run_completes_with_its_summary() {
     rec.check_continuity().expect("every tick recorded once, in order");
 }
 
+/// `rig run` in lockstep reads its recording for the summary while the plant writes it; a run
+/// into the same `--out` as a longer one before must summarise its own file, not the last one's.
+#[test]
+fn a_lockstep_run_into_the_last_runs_directory_summarises_its_own_recording() {
+    let _g = serial();
+    let rig = unique_rig("again");
+    let dir = temp_dir(&rig);
+    let scenario = write_scenario(&dir, "lockstep", "");
+    let out = dir.join("out");
+    let mut last = String::new();
+    for (duration, ticks) in [("0.6", 600), ("0.3", 300)] {
+        let mut run = Daemon::start(
+            "rig",
+            &bin("rig"),
+            &["run", scenario.to_str().unwrap(), "--mode", "lockstep", "--duration", duration, "--out", out.to_str().unwrap()],
+            &dir,
+        );
+        let st = run.expect_exit(LONG);
+        let (stdout, stderr) = (run.stdout(), run.stderr());
+        assert!(st.success(), "rig run failed ({st}):\n{stdout}\n{stderr}");
+        // the read-back's line (the plant's own is "ticks N  misses ...")
+        let line = format!("ticks       {ticks} (0..={})", ticks - 1);
+        assert!(stdout.contains(&line), "{line:?} missing from the summary (after {last:?}):\n{stdout}");
+        assert!(stdout.contains("recording complete"), "{stdout}");
+        last = line;
+    }
+    let rec = Recording::open_complete(out.join("run.mcap")).expect("complete recording");
+    assert_eq!(rec.joint_state.len(), 300);
+}
+
 #[test]
 fn killed_controller_puts_the_plant_into_safe_stop_and_a_restarted_one_resumes_without_jump() {
     let _g = serial();
