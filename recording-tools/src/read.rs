@@ -198,7 +198,7 @@ enum Stop {
     Bad(String),
 }
 
-/// How much of a followed file is walked before it is known to be the rig's: its header, schemas,
+/// How much of a followed file is read before it is known to be the rig's: its header, schemas,
 /// channels and run metadata (with the scenario's text) come first, within a few kB.
 const FOLLOW_PROBE_BYTES: usize = 1 << 20;
 
@@ -224,6 +224,9 @@ struct Walk {
     /// The chunk the walk is in when it stops, if it stops at one.
     in_chunk: Option<usize>,
     saw_data_end: bool,
+    /// Stop (as [`Step::More`]) right after the run metadata: a follow that has yet to learn
+    /// whose file it is reads no further.
+    pause_at_run_metadata: bool,
 }
 
 /// How far a walk over the bytes so far got.
@@ -261,6 +264,7 @@ impl Walk {
             chunk: 0,
             in_chunk: None,
             saw_data_end: false,
+            pause_at_run_metadata: false,
         }
     }
 
@@ -299,6 +303,10 @@ impl Walk {
                 op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
                     if let Err(why) = self.rec.read_record(path, opcode, body, &mut self.links)? {
                         return Ok(Step::Stopped(Some(Stop::Bad(why))));
+                    }
+                    if opcode == op::METADATA && self.pause_at_run_metadata && self.rec.metadata.contains_key(RECORD_NAME) {
+                        self.at = next;
+                        return Ok(Step::More);
                     }
                 }
                 _ => {}
@@ -417,61 +425,75 @@ impl Recording {
         poll: std::time::Duration,
         progress: &dyn Fn() -> Writing,
     ) -> Option<Result<Self, ReadError>> {
+        use std::io::Read;
         let mut bytes: Vec<u8> = Vec::new();
         let mut file: Option<std::fs::File> = None;
         let mut walk = Walk::new(path, wanted);
         let mut unpack = Unpacker::default();
         // Whether the file is this rig's: its run metadata came and names `rig`.
         let mut ours = false;
+        // Another rig's file as last seen (length, modification time): not read again unchanged.
+        let mut stale: Option<(u64, Option<std::time::SystemTime>)> = None;
+        let seen = || std::fs::metadata(path).ok().filter(|m| m.is_file()).map(|m| (m.len(), m.modified().ok()));
+        let io = |cause| ReadError::Io { path: path.into(), cause };
         loop {
             // Read before reading the file: what was written by then is in the file.
             let writing = progress();
             if writing == Writing::Abandoned {
                 return None;
             }
-            if file.is_none() {
-                file = std::fs::File::open(path).ok().filter(|f| f.metadata().is_ok_and(|m| m.is_file()));
-            }
-            if let Some(f) = file.as_mut() {
-                use std::io::Read;
-                if let Err(e) = f.read_to_end(&mut bytes) {
-                    return Some(Err(ReadError::Io { path: path.into(), cause: e }));
-                }
-            }
             let finished = writing == Writing::Finished;
-            if !ours && !finished {
-                // Not yet known to be this rig's: walk on as far as the file goes, and start
-                // over whenever it turns out to be another's (or not an MCAP file yet).
-                // (The start only: the run metadata comes before the first message.)
-                let start = &bytes[..bytes.len().min(FOLLOW_PROBE_BYTES)];
-                let walked = bytes.starts_with(MCAP_MAGIC).then(|| walk.on(path, start, &mut unpack, true));
+            if !ours && finished {
+                // never found to be ours: read as a read of it after the run would read it
+                return Some(Self::open_channels(path, wanted));
+            }
+            if !ours {
+                // Its start only (the run metadata comes before the first message), up to that
+                // record; again from the start whenever it turns out to be another's (or not an
+                // MCAP file).
+                if file.is_none() && (stale.is_none() || seen() != stale) {
+                    file = std::fs::File::open(path).ok().filter(|f| f.metadata().is_ok_and(|m| m.is_file()));
+                }
+                if let Some(f) = file.as_mut() {
+                    let room = FOLLOW_PROBE_BYTES.saturating_sub(bytes.len()) as u64;
+                    if let Err(e) = f.by_ref().take(room).read_to_end(&mut bytes) {
+                        return Some(Err(io(e)));
+                    }
+                }
+                walk.pause_at_run_metadata = true;
+                let walked = bytes.starts_with(MCAP_MAGIC).then(|| walk.on(path, &bytes, &mut unpack, true));
                 let meta_rig = walk.rec.metadata.get(RECORD_NAME).map(|m| m.get("rig").map(String::as_str) == Some(rig));
                 match (walked, meta_rig) {
-                    (Some(Ok(_)), Some(true)) => ours = true,
-                    (Some(Ok(Step::More)), None) => {}
-                    (None, _) if bytes.len() < MCAP_MAGIC.len() && !bytes.is_empty() => {}
-                    _ => {
-                        // another run's file, or not an MCAP file (yet): again from the start
+                    (Some(Ok(_)), Some(true)) => {
+                        ours = true;
+                        walk.pause_at_run_metadata = false;
+                    }
+                    (Some(Ok(Step::More)), None) if bytes.len() < FOLLOW_PROBE_BYTES => {}
+                    (None, _) if bytes.len() < MCAP_MAGIC.len() => {}
+                    (_, other_rig) => {
+                        stale = if other_rig == Some(false) { seen() } else { None };
                         (bytes, file, walk) = (Vec::new(), None, Walk::new(path, wanted));
                     }
                 }
-            } else if !finished {
+            }
+            if ours {
+                if let Some(f) = file.as_mut() {
+                    if let Err(e) = f.read_to_end(&mut bytes) {
+                        return Some(Err(io(e)));
+                    }
+                }
+                if finished {
+                    // The whole file, judged as a read of it after the run would judge it.
+                    let stop = match walk.on(path, &bytes, &mut unpack, false) {
+                        Ok(Step::Stopped(stop)) => stop,
+                        Ok(Step::More) => unreachable!("a walk of the whole file stops"),
+                        Err(e) => return Some(Err(e)),
+                    };
+                    return Some(walk.finish(path, &bytes, stop));
+                }
                 if let Err(e) = walk.on(path, &bytes, &mut unpack, true) {
                     return Some(Err(e));
                 }
-            }
-            if finished {
-                // The whole file: judged as a read of it after the run would judge it (a file
-                // never found to be ours is read that way too).
-                if !ours {
-                    return Some(Self::open_channels(path, wanted));
-                }
-                let stop = match walk.on(path, &bytes, &mut unpack, false) {
-                    Ok(Step::Stopped(stop)) => stop,
-                    Ok(Step::More) => unreachable!("a walk of the whole file stops"),
-                    Err(e) => return Some(Err(e)),
-                };
-                return Some(walk.finish(path, &bytes, stop));
             }
             std::thread::sleep(poll);
         }
