@@ -475,6 +475,8 @@ type Reader = tokio::task::JoinHandle<(String, Option<tokio::task::JoinHandle<Re
 struct Follower {
     progress: std::sync::Arc<std::sync::atomic::AtomicU8>,
     result: tokio::sync::oneshot::Receiver<Option<ReadBack>>,
+    /// The following thread, unparked when the file is finished (it would wait out its poll).
+    thread: std::thread::Thread,
 }
 
 /// [`recording_tools::read::Writing`] as the follower's shared state.
@@ -488,7 +490,7 @@ impl Follower {
         let progress = std::sync::Arc::new(std::sync::atomic::AtomicU8::new(WRITING));
         let (tx, result) = tokio::sync::oneshot::channel();
         let (path, rig, seen) = (recording.to_path_buf(), rig.to_string(), progress.clone());
-        std::thread::Builder::new()
+        let handle = std::thread::Builder::new()
             .name("follow-recording".into())
             .spawn(move || {
                 rig_process::rt::keep_thread_off_cpu(lockstep_cpu);
@@ -500,12 +502,13 @@ impl Follower {
                 let _ = tx.send(recording_tools::cli::summary_numbers_following(&path, &rig, &progress));
             })
             .ok()?;
-        Some(Follower { progress, result })
+        Some(Follower { progress, result, thread: handle.thread().clone() })
     }
 
     /// The recording is finished: the numbers once the rest is read.
     fn finished(self) -> tokio::task::JoinHandle<ReadBack> {
         self.progress.store(FINISHED, std::sync::atomic::Ordering::Release);
+        self.thread.unpark();
         tokio::spawn(async move {
             match self.result.await {
                 Ok(Some(numbers)) => numbers,

@@ -417,7 +417,9 @@ impl Recording {
     /// rig than `rig` (the last run's at the same path, before the plant truncates it) is read
     /// again from the start once it does. Once `progress` says [`Writing::Finished`] the rest is
     /// read and judged exactly as [`open_channels`](Self::open_channels) would judge the whole
-    /// file; [`Writing::Abandoned`] ends the follow with None. Polls every `poll`.
+    /// file; [`Writing::Abandoned`] ends the follow with None. Polls every `poll`, waiting with
+    /// [`std::thread::park_timeout`]: whoever changes `progress` can unpark this thread to be
+    /// heard at once.
     pub fn follow_channels(
         path: &Path,
         wanted: Channels,
@@ -495,7 +497,7 @@ impl Recording {
                     return Some(Err(e));
                 }
             }
-            std::thread::sleep(poll);
+            std::thread::park_timeout(poll);
         }
     }
 
