@@ -61,6 +61,16 @@ fn lockstep_run_twice_gives_bit_identical_torques_and_states() {
     assert!(a.joint_torque.iter().any(|t| t.torque.tau != first));
 }
 
+/// `rig run SCENARIO --mode MODE --duration S --out OUT`, which must exit 0; its stdout.
+fn rig_run(dir: &std::path::Path, scenario: &std::path::Path, mode: &str, duration_s: &str, out: &std::path::Path) -> String {
+    let args = ["run", scenario.to_str().unwrap(), "--mode", mode, "--duration", duration_s, "--out", out.to_str().unwrap()];
+    let mut run = Daemon::start("rig", &bin("rig"), &args, dir);
+    let st = run.expect_exit(LONG);
+    let (stdout, stderr) = (run.stdout(), run.stderr());
+    assert!(st.success(), "rig run failed ({st}):\n{stdout}\n{stderr}");
+    stdout
+}
+
 #[test]
 fn short_realtime_run_completes_with_its_summary() {
     let _g = serial();
@@ -68,15 +78,7 @@ fn short_realtime_run_completes_with_its_summary() {
     let dir = temp_dir(&rig);
     let scenario = write_scenario(&dir, "realtime", "");
     let out = dir.join("out");
-    let mut run = Daemon::start(
-        "rig",
-        &bin("rig"),
-        &["run", scenario.to_str().unwrap(), "--mode", "realtime", "--duration", "0.5", "--out", out.to_str().unwrap()],
-        &dir,
-    );
-    let st = run.expect_exit(LONG);
-    let (stdout, stderr) = (run.stdout(), run.stderr());
-    assert!(st.success(), "rig run failed ({st}):\n{stdout}\n{stderr}");
+    let stdout = rig_run(&dir, &scenario, "realtime", "0.5", &out);
     for needle in ["ticks 500", "misses", "safe stops", "round trip", "p50", "p99", "max", "run.mcap"] {
         assert!(stdout.contains(needle), "{needle:?} missing from the summary:\n{stdout}");
     }
@@ -96,15 +98,7 @@ fn a_lockstep_run_into_the_last_runs_directory_summarises_its_own_recording() {
     let out = dir.join("out");
     let mut last = String::new();
     for (duration, ticks) in [("0.6", 600), ("0.3", 300)] {
-        let mut run = Daemon::start(
-            "rig",
-            &bin("rig"),
-            &["run", scenario.to_str().unwrap(), "--mode", "lockstep", "--duration", duration, "--out", out.to_str().unwrap()],
-            &dir,
-        );
-        let st = run.expect_exit(LONG);
-        let (stdout, stderr) = (run.stdout(), run.stderr());
-        assert!(st.success(), "rig run failed ({st}):\n{stdout}\n{stderr}");
+        let stdout = rig_run(&dir, &scenario, "lockstep", duration, &out);
         // the read-back's line (the plant's own is "ticks N  misses ...")
         let line = format!("ticks       {ticks} (0..={})", ticks - 1);
         assert!(stdout.contains(&line), "{line:?} missing from the summary (after {last:?}):\n{stdout}");
