@@ -117,10 +117,10 @@ enum BlendFrom {
     SafeStop,
 }
 
-/// The arm as the plant has it at the start of a tick, for the hold: g(q), q, q̇, and M(q) on
-/// demand (only a position hold needs it).
+/// The arm as the plant has it at the start of a tick, for the hold: q, q̇, and g(q) and M(q)
+/// on demand (only a hold needs them: a tick the controller's torque passes costs neither).
 pub struct ArmNow<'a> {
-    pub gravity: Vec6,
+    pub gravity: &'a dyn Fn() -> Vec6,
     pub q: Vec6,
     pub qd: Vec6,
     pub mass_matrix: &'a dyn Fn() -> Mat6,
@@ -277,10 +277,10 @@ impl Gate {
     fn safe_stop_torque(&mut self, arm: &ArmNow) -> Vec6 {
         let w = self.cfg.hold_omega_radps;
         match &mut self.hold {
-            Hold::Compliant => arm.gravity - arm.qd.component_mul(&Vec6::from(self.cfg.safe_stop_damping_nms)),
+            Hold::Compliant => (arm.gravity)() - arm.qd.component_mul(&Vec6::from(self.cfg.safe_stop_damping_nms)),
             Hold::Position(anchor) => {
                 let anchor = *anchor.get_or_insert(arm.q);
-                arm.gravity + (arm.mass_matrix)() * ((anchor - arm.q) * (w * w) - arm.qd * (2.0 * w))
+                (arm.gravity)() + (arm.mass_matrix)() * ((anchor - arm.q) * (w * w) - arm.qd * (2.0 * w))
             }
         }
     }
@@ -408,7 +408,7 @@ mod tests {
     }
 
     fn arm(q: Vec6, qd: Vec6) -> ArmNow<'static> {
-        ArmNow { gravity: g(), q, qd, mass_matrix: &mass }
+        ArmNow { gravity: &g, q, qd, mass_matrix: &mass }
     }
 
     /// The joint position the tests' plant reports unless a test moves it.

@@ -268,7 +268,7 @@ impl PlantTick {
         let t = self.sim_time_s();
         let physics = &self.physics;
         let arm = ArmNow {
-            gravity: physics.gravity_torque(),
+            gravity: &|| physics.gravity_torque(),
             q: physics.q(),
             qd: physics.qd(),
             mass_matrix: &|| physics.robot().mass_matrix(&physics.q()),
