@@ -4,19 +4,19 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use recordings::PlantSummary;
 use scenarios::{Mode, Scenario};
 
 use crate::driver::realtime::{LoopParams, PlantLoop};
-use crate::physics::Physics;
-use crate::recording::{EventKind, EventRecord, Recorder, RecorderConfig};
-use crate::stats::LoopStats;
+use crate::recording::{EventKind, EventRecord};
 use rig_process::rt;
 
-/// Nice value of the lockstep loop thread: CFS weight ~9.3x a nice-0 thread, so a CPU-bound job
-/// sharing the lockstep CPU takes ~10 % of it instead of ~50 % (measured with a concurrent rustc
-/// on the 2-vCPU VM: lockstep default scenario median 21.9x -> 26.5x real time, 5 runs each).
-const LOCKSTEP_NICE: i32 = -10;
+mod recording;
+mod startup;
+mod summary;
+
+pub use recording::{open_recorder, open_recorder_with, RecordingAbout};
+use startup::{schedule_loop_thread, set_up_side_by_side, start_probe, SetUp, SetUpInputs};
+pub use summary::RunSummary;
 
 /// Options of one plant run (the command line of `plant-sim`).
 #[derive(Debug, Clone)]
@@ -80,153 +80,6 @@ pub fn default_recording_path(rig: &str) -> PathBuf {
     Path::new("runs").join(format!("{secs}-{rig}")).join("run.mcap")
 }
 
-/// Result of a run, printed by `plant-sim` as one JSON line.
-pub struct RunSummary {
-    pub stats: LoopStats,
-    pub recording: Option<PathBuf>,
-    pub drops: u64,
-    /// Why the recorder ended the recording before the run ended (disk full, write error), as
-    /// its `finish` reports it; the file then ends after its last complete chunk.
-    pub recording_stopped_early: Option<String>,
-    pub mode: Mode,
-    pub rt: rt::RtSetup,
-    /// The live view's address and what it sent and dropped, if it ran.
-    pub live: Option<(std::net::SocketAddr, recordings::LiveSummary)>,
-    /// What the host-floor probe measured, per CPU (None: it did not run).
-    pub probe: Option<Vec<crate::probe::CpuReport>>,
-    /// The EGM counters, when the scenario's `[egm]` is enabled.
-    pub egm: Option<crate::driver::egm::EgmStats>,
-}
-
-impl RunSummary {
-    /// The typed summary `plant-sim` prints as its last line ([`PlantSummary::to_line`]).
-    pub fn to_summary(&self, rig: &str) -> PlantSummary {
-        use recordings::plant_summary::{EgmCounters, HostProbe, LiveReport};
-        let s = &self.stats;
-        let us = |ns: u64| ns as f64 * 1e-3;
-        let edges = [0.0, 10.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0, 300.0, 500.0, 1000.0, 2000.0];
-        PlantSummary {
-            rig: rig.to_string(),
-            mode: self.mode,
-            ticks: s.ticks,
-            misses: s.misses,
-            safe_stops: s.safe_stops,
-            refusals: s.refusals,
-            reflexes: s.reflexes,
-            foreign_answers: s.foreign_answers,
-            first_safe_stop_tick: s.first_safe_stop_tick,
-            first_reflex_tick: s.first_reflex_tick,
-            first_refusal_tick: s.first_refusal_tick,
-            controller_ended: s.controller_ended,
-            overruns: s.overruns,
-            lost_wakeups: s.lost_wakeups,
-            lost_wakeups_in_a_row: s.lost_wakeups_in_a_row,
-            rt_p50_us: us(s.round_trip.quantile_ns(0.5)),
-            rt_p99_us: us(s.round_trip.quantile_ns(0.99)),
-            rt_max_us: us(s.round_trip.max_ns()),
-            recording: self.recording.as_ref().map(|p| p.display().to_string()),
-            drops: self.drops,
-            recording_stopped_early: self.recording_stopped_early.clone(),
-            live: self.live.map(|(addr, l)| LiveReport { addr: addr.to_string(), sent: l.sent, dropped: l.dropped }),
-            wall_s: s.wall_s,
-            sim_s: s.sim_s,
-            speed_factor: if s.active_wall_s > 0.0 { s.active_sim_s / s.active_wall_s } else { 0.0 },
-            stopped_by_signal: s.stopped_by_signal,
-            sched_fifo: self.rt.sched_fifo,
-            mlockall: self.rt.mlockall,
-            round_trip: s.round_trip.distribution(&edges),
-            jitter: s.jitter.distribution(&edges),
-            plant_compute: s.plant_compute.distribution(&edges),
-            controller_compute: s.controller_compute.distribution(&edges),
-            host_probe: self.probe.as_ref().map(|cpus| HostProbe {
-                stall_threshold_us: crate::probe::HOST_STALL_NS as f64 * 1e-3,
-                cpus: cpus.iter().map(|c| c.report(&edges)).collect(),
-            }),
-            egm: self.egm.map(|e| EgmCounters {
-                accepted: e.accepted,
-                refused: e.refused,
-                cycles: e.cycles,
-                session_ended_tick: e.session_ended_tick,
-            }),
-        }
-    }
-}
-
-/// What a recording's metadata says about the run besides the scenario.
-pub struct RecordingAbout<'a> {
-    pub rig: &'a str,
-    pub mode: Mode,
-    pub scenario_path: &'a Path,
-    /// The scenario file's text as read (recorded whole).
-    pub scenario_text: String,
-    /// `Some("in-process")` for a run without daemons; None: the plant's own (iceoryx2 or EGM).
-    pub transport: Option<&'a str>,
-}
-
-/// Start the recorder on `path` (its directory created) with the run's metadata and scene, as
-/// every driver of the plant records.
-pub fn open_recorder(
-    path: &Path,
-    about: &RecordingAbout,
-    scenario: &Scenario,
-    physics: &Physics,
-    live: Option<recordings::LiveConfig>,
-) -> anyhow::Result<Recorder> {
-    open_recorder_with(path, about, scenario, physics, live, recordings::RecorderTuning::for_mode(about.mode))
-}
-
-/// Largest recorder queue in lockstep, records. Lockstep has no deadline: the loop waits for
-/// room (`tick.rs`) instead of dropping, so the queue need not absorb a stalled writer, and the
-/// start need not touch `recording.queue_capacity` slots of about 3.5 kB each (8192 by default:
-/// 28 MB, 17-25 ms of the start on the idle VM, 2026-12-04).
-const LOCKSTEP_QUEUE_CAPACITY: usize = 1024;
-
-/// [`open_recorder`] with the writer's `tuning`.
-pub fn open_recorder_with(
-    path: &Path,
-    about: &RecordingAbout,
-    scenario: &Scenario,
-    physics: &Physics,
-    live: Option<recordings::LiveConfig>,
-    tuning: recordings::RecorderTuning,
-) -> anyhow::Result<Recorder> {
-    let l = &scenario.loop_;
-    let mode = about.mode;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    let metadata = recordings::RunMetadata {
-        rig: about.rig.to_string(),
-        mode,
-        scenario: Some(recordings::run_metadata::ScenarioSource {
-            path: about.scenario_path.display().to_string(),
-            toml: about.scenario_text.clone(),
-        }),
-        period_s: l.period_s,
-        substeps: l.substeps,
-        integrator: l.integrator,
-        transport: about.transport.map(str::to_string),
-        egm: scenario.egm.enabled.then(|| recordings::run_metadata::EgmRun {
-            servo_lag_s: crate::driver::egm::servo::ServoParams::from_scenario(scenario).lag_s(),
-        }),
-        // z of the centre-line bottom nodes, in the order of the recorded pressures (contact.rs).
-        centreline_z_m: physics.contact().map(|c| c.centreline_z_m().to_vec()),
-    };
-    let cfg = RecorderConfig {
-        path: path.to_path_buf(),
-        queue_capacity: match mode {
-            Mode::Lockstep => scenario.recording.queue_capacity.min(LOCKSTEP_QUEUE_CAPACITY),
-            Mode::Realtime => scenario.recording.queue_capacity,
-        },
-        chunk_size_bytes: scenario.recording.chunk_size_bytes,
-        metadata,
-        live,
-        scene: Some(scene_config(scenario, physics.contact(), physics.chain())),
-        period_s: l.period_s,
-    };
-    Recorder::start_with(cfg, tuning).with_context(|| format!("starting the recorder on {}", path.display()))
-}
-
 /// How long a plant stopped by a signal waits for its launcher's last thread to end before it
 /// decides the launcher lives on (a stop `rig` asked for pays it once, at the end).
 const LAUNCHER_EXIT_GRACE: std::time::Duration = std::time::Duration::from_millis(200);
@@ -272,10 +125,6 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     let signals = crate::signals::Signals::install();
 
     let t_setup = std::time::Instant::now();
-    // Lockstep: the recorder's writer thread inherits the affinity of the thread that spawns it;
-    // the set-up thread below keeps itself off the CPU the loop and the controller are pinned to
-    // before it starts the recorder (ZSTD compression costs ~10 µs per tick, which would
-    // otherwise come out of the lockstep tick whenever the scheduler places the writer there).
     // (The CPU is chosen here: lockstep_cpu counts this thread's allowed CPUs.)
     let lockstep_cpu = rt::lockstep_cpu();
     anyhow::ensure!(
@@ -284,99 +133,10 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
         opts.scenario_path.display()
     );
     let recording = scenario.recording.enabled.then(|| opts.out.clone().unwrap_or_else(|| default_recording_path(&opts.rig)));
-    // The strip model and contact tables, then the recorder (whose scene needs the model), on a
-    // set-up thread while this one opens the iceoryx2 ports and the liveness watch: neither
-    // needs the other, and each took about half of the plant's start-up (README, "Lockstep
-    // start-up"). Without a thread, one after the other.
-    let physics_then_recorder = || -> anyhow::Result<(Physics, Option<Recorder>, std::time::Duration, std::time::Duration)> {
-        let t0 = std::time::Instant::now();
-        // With every CPU, as on the main thread: a strip model built on a cache miss uses faer's
-        // pool, which takes its size from the affinity of the thread that first uses it (the
-        // bits do not depend on that size: the build's task count is fixed, strip::BUILD_TASKS).
-        let physics = Physics::new(&scenario, &opts.cache_dir)?;
-        let t_physics = t0.elapsed();
-        if mode == Mode::Lockstep && !rt::keep_thread_off_cpu(lockstep_cpu) {
-            tracing::warn!("could not keep the recorder off the lockstep CPU {lockstep_cpu}");
-        }
-        let recorder = match &recording {
-            Some(path) => {
-                let about = RecordingAbout {
-                    rig: &opts.rig,
-                    mode,
-                    scenario_path: &opts.scenario_path,
-                    scenario_text: scenario_text.clone(),
-                    transport: None,
-                };
-                Some(open_recorder(path, &about, &scenario, &physics, opts.live.clone())?)
-            }
-            None => None,
-        };
-        Ok((physics, recorder, t_physics, t0.elapsed() - t_physics))
-    };
-    let ports_and_watch = || -> anyhow::Result<(rig_process::ports::PlantPorts, rig_process::liveness::PeerWatch, std::time::Duration)> {
-        let t0 = std::time::Instant::now();
-        // Liveness of the controllers' nodes, on its own thread (started before the loop's
-        // real-time set-up, so it keeps the normal scheduling policy), setting up while this
-        // thread opens the ports.
-        let watch = rig_process::liveness::PeerWatch::start(&opts.rig, "plant-sim-watch", rig_process::liveness::Watched::Controllers)?;
-        let ports = rig_process::ports::PlantPorts::open(&opts.rig, "plant-sim")?;
-        let watch = watch.ready()?;
-        Ok((ports, watch, t0.elapsed()))
-    };
-    let (set_up, opened) = std::thread::scope(|scope| {
-        match std::thread::Builder::new().name("plant-setup".into()).spawn_scoped(scope, physics_then_recorder) {
-            Ok(helper) => {
-                let opened = ports_and_watch();
-                (helper.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the plant's set-up thread panicked"))), opened)
-            }
-            Err(_) => (physics_then_recorder(), ports_and_watch()),
-        }
-    });
-    // The model's refusal first, as when the two ran one after the other.
-    let (physics, mut recorder, t_physics, t_recorder) = set_up?;
-    let (ports, watch, t_ports) = opened?;
+    let inputs = SetUpInputs { opts, scenario: &scenario, scenario_text: &scenario_text, mode, recording: &recording, lockstep_cpu };
+    let SetUp { physics, mut recorder, ports, watch, t_physics, t_recorder, t_ports } = set_up_side_by_side(&inputs)?;
     let mut arbiter = crate::arbiter::Arbiter::new(l.takeover_after_misses);
-
-    // Real-time set-up after the recorder's writer thread exists (it keeps the normal policy).
-    // Lockstep keeps the normal policy: nothing there is time-critical, and a SCHED_FIFO waker
-    // hands over to the controller across CPUs (waking a halted vCPU) instead of on its own CPU,
-    // which measured 50 µs instead of 15 µs per round trip on a 2-vCPU VM.
-    // Memory is locked in real time only: a lockstep run has no deadline a page fault could
-    // miss, and locking populates every mapping at once (each thread's whole stack among them),
-    // about 5 ms of the lockstep start-up's critical path in the kernel (perf, 2026-12-06).
-    let rt_setup = rt::setup_thread((mode == Mode::Realtime).then_some(80), mode == Mode::Realtime);
-    if mode == Mode::Lockstep {
-        let cpu = lockstep_cpu;
-        if !rt::pin_thread_to_cpu(cpu) {
-            tracing::warn!("could not pin the lockstep loop to CPU {cpu}");
-        }
-        // A lockstep run is CPU-bound on its one CPU; at nice 0 a compiler or test job scheduled
-        // there takes half of it. The controller already runs SCHED_FIFO; the loop gets a larger
-        // CFS weight instead (no real-time hand-over semantics, see above).
-        if !rt::set_thread_nice(LOCKSTEP_NICE) {
-            tracing::debug!("could not set the lockstep loop's nice value to {LOCKSTEP_NICE} (needs CAP_SYS_NICE)");
-        }
-    }
-    // Both modes: lockstep hands over twice a tick too, and each hand-over to a halted vCPU
-    // costs its wake-up.
-    if l.idle_poll {
-        match (rt::hold_idle_poll(), rt::cpuidle_driver()) {
-            (Ok(()), Some(driver)) => tracing::info!(
-                "idle CPUs poll while the plant runs (PM QoS /dev/cpu_dma_latency = 0 µs, cpuidle driver {driver}; loop.idle_poll)"
-            ),
-            (Ok(()), None) => tracing::info!(
-                "PM QoS /dev/cpu_dma_latency held at 0 µs (loop.idle_poll), but this kernel has no cpuidle driver to read it: idle CPUs halt anyway (only loop.spin_wait_us and loop.controller_spin_us shorten wake-ups)"
-            ),
-            (Err(e), _) => tracing::warn!("could not hold /dev/cpu_dma_latency at 0 µs ({e}): idle CPUs may halt, wake-ups cost more"),
-        }
-    }
-    if mode == Mode::Realtime && (!rt_setup.sched_fifo || !rt_setup.mlockall) {
-        tracing::warn!(
-            "real-time set-up incomplete: SCHED_FIFO {}, mlockall {} (needs CAP_SYS_NICE/rtprio and memlock limits); running best-effort",
-            if rt_setup.sched_fifo { "on" } else { "refused" },
-            if rt_setup.mlockall { "on" } else { "refused" }
-        );
-    }
+    let rt_setup = schedule_loop_thread(mode, lockstep_cpu, l.idle_poll);
     // The start-up's parts (README, "Lockstep start-up"): scenario and host checks, strip model
     // and contact tables, then the recorder (set-up thread), beside ports and liveness watch
     // (this thread), and the whole set-up to here.
@@ -397,39 +157,19 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
         let text = format!("plant started: rig {}, mode {mode:?}, {} ticks", opts.rig, params.n_ticks);
         r.record_event(&EventRecord::new(0, 0.0, EventKind::Start, &text));
     }
+    let probe = start_probe(opts, mode, period_ns)?;
 
-    // The host-floor probe, one thread per CPU this process may use (README, "Timing").
-    let probe = match (opts.host_probe, mode) {
-        (true, Mode::Realtime) => {
-            let cpus = crate::probe::allowed_cpus();
-            let probe_period_ns = opts.host_probe_period_ns.clamp(10_000, period_ns);
-            let p = crate::probe::Probe::start(&cpus, probe_period_ns).context("starting the host probe")?;
-            tracing::info!(
-                ?cpus,
-                probe_period_us = probe_period_ns / 1000,
-                "host probe running (SCHED_FIFO {} when permitted)",
-                crate::probe::PROBE_PRIORITY
-            );
-            Some(p)
-        }
-        (true, Mode::Lockstep) => {
-            tracing::warn!("--host-probe applies to real-time runs only; not started in lockstep");
-            None
-        }
-        _ => None,
-    };
     // The strip record's top line only on the ticks the recording draws its scene for.
     let top_line_every = recorder.as_ref().and_then(|r| r.scene_every());
+    let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode).with_top_line_every(top_line_every);
     // [egm] enabled: the plant is an ABB robot controller speaking EGM over UDP (`egm/`),
     // instead of taking torques over iceoryx2.
     let (stats, egm) = if scenario.egm.enabled {
         let ep = crate::driver::egm::EgmParams::from_scenario(&scenario, mode, params.n_ticks)?;
         tracing::info!(sensor = %ep.sensor, "EGM: sending EgmRobot every {} s", scenario.egm.cycle_s);
-        let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode).with_top_line_every(top_line_every);
         let (stats, es) = crate::driver::egm::EgmLoop::new(&scenario, &mut plant, recorder.as_mut(), ep, signals)?.run();
         (stats, Some(es))
     } else {
-        let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode).with_top_line_every(top_line_every);
         let mut plant_loop = PlantLoop {
             ports: &ports,
             plant: &mut plant,
@@ -446,6 +186,7 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
         };
         (stats, None)
     };
+
     let probe = probe.map(crate::probe::Probe::finish);
     if let (Some(r), Some(cpus)) = (recorder.as_mut(), probe.as_ref()) {
         r.record_event(&EventRecord::new(stats.ticks, stats.sim_s, EventKind::Info, &crate::probe::summary_text(cpus)));
@@ -478,63 +219,6 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     drop(ports);
     drop(watch);
     Ok(summary)
-}
-
-/// What the recording's Foxglove channels draw: the scenario's tool and placement, and the strip
-/// model's top surface (`recordings::scene`).
-fn scene_config(
-    s: &scenarios::Scenario,
-    contact: Option<&crate::contact::StripContact>,
-    chain: Option<&crate::contact::chain::ChainContact>,
-) -> recordings::scene::SceneConfig {
-    use recordings::scene::{SceneConfig, StripGeometry};
-    let params = crate::contact::strip_params(s);
-    // A windowed long strip: one window's layer pattern repeated along the whole strip (the scene
-    // draws the layers around the wheel) and the substrate's profile at every element.
-    let long = chain.map(|c| {
-        let top = c.window_top_xyz_m();
-        let nodes_per_layer = top.iter().take_while(|n| (n[2] - top[0][2]).abs() < 1e-12).count();
-        let (length_m, element_m) = (c.chain().strip_length_m, params.element_m);
-        let layers = (length_m / element_m).round() as usize + 1;
-        let top_xyz_m = (0..layers).flat_map(|k| top[..nodes_per_layer].iter().map(move |n| [n[0], n[1], k as f64 * element_m])).collect();
-        let profile = crate::contact::chain::substrate_profile(s);
-        StripGeometry {
-            top_xyz_m,
-            nodes_per_layer,
-            substrate_zy_m: (0..layers).map(|k| [k as f64 * element_m, profile.height_m(k as f64 * element_m)]).collect(),
-            length_m,
-            half_width_m: strip::mesh::HALF_WIDTH_M,
-            windowed: true,
-        }
-    });
-    let strip = long.or_else(|| {
-        contact.map(|c| {
-            let top = c.top_xyz_m();
-            let nodes_per_layer = top.iter().take_while(|n| (n[2] - top[0][2]).abs() < 1e-12).count();
-            StripGeometry {
-                top_xyz_m: top.to_vec(),
-                nodes_per_layer,
-                substrate_zy_m: (0..=200)
-                    .map(|i| {
-                        let z = params.length_m * i as f64 / 200.0;
-                        [z, params.bulge_height_m(z)]
-                    })
-                    .collect(),
-                length_m: params.length_m,
-                half_width_m: strip::mesh::HALF_WIDTH_M,
-                windowed: false,
-            }
-        })
-    });
-    SceneConfig {
-        rate_hz: s.recording.scene_rate_hz,
-        tool: scenarios::geometry::tool(s),
-        task_in_base: scenarios::geometry::TaskFrame::from_scenario(s).pose_in_base(),
-        strip,
-        path: None,
-        band_base: Vec::new(),
-    }
-    .along(s.contour.is_given().then(|| scenarios::path::StripPath::from_scenario(s)))
 }
 
 #[cfg(test)]
