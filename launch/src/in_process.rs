@@ -68,8 +68,13 @@ pub fn run(
         None => None,
     };
     // Without a recording only the figures read the strip: its pressure under the wheel; with
-    // one, the scene's top line only on the ticks it is drawn.
-    let detail = if recorder.is_some() { StripDetail::Full } else { StripDetail::UnderWheel };
+    // one, the scene's top line only on the ticks it is drawn, and the centre line computed on
+    // the writer thread when nothing here reads it (no rows kept).
+    let detail = match (&recorder, &rows) {
+        (Some(r), None) if r.expands_centre_line() => StripDetail::Modal,
+        (Some(_), _) => StripDetail::Full,
+        (None, _) => StripDetail::UnderWheel,
+    };
     let top_line_every = recorder.as_ref().and_then(|r| r.scene_every());
     let mut plant = PlantTick::new(&s, physics, Mode::Lockstep).with_strip_detail(detail).with_top_line_every(top_line_every);
     let mut controller = controller::Controller::from_scenario(&s).with_id(IN_PROCESS_CONTROLLER_ID);

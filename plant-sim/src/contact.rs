@@ -33,7 +33,7 @@
 use std::sync::Arc;
 
 use nalgebra::{Matrix3, Vector3};
-use recordings::{StripRecord, MAX_CENTRELINE};
+use recordings::{StripRecord, MAX_CENTRELINE, MAX_MODAL_STATE};
 use robot::Vec6;
 use scenarios::{Boundary, Scenario};
 use strip::{CbBoundary, StripModel, StripParams, Substrate};
@@ -678,6 +678,11 @@ pub enum StripDetail {
     /// bit, for a sweep or study case that writes no recording. The single-model strip only; a
     /// windowed strip's record stays full.
     UnderWheel,
+    /// The scalars and the strip's state (O(modes)), the centre line and the maximum left to the
+    /// recorder's writer thread, which computes them with [`StripContact::centre_line`]: the
+    /// recording bit for bit the full one's (the top line on the scene's ticks only, as
+    /// `NoTopLine` otherwise). A state longer than a record holds gets the full record.
+    Modal,
 }
 
 /// The strip, its bulge and the unilateral wheel contact (see the module docs).
@@ -831,13 +836,15 @@ impl StripContact {
     }
 
     /// [`StripContact::fill_record`] to the given detail: with [`StripDetail::UnderWheel`] the
-    /// centre line's pressure at the two nodes around the wheel only, O(modes).
+    /// centre line's pressure at the two nodes around the wheel only, O(modes); with
+    /// [`StripDetail::Modal`] the scalars and the strip's state, O(modes), the centre line left
+    /// to the recorder's writer thread ([`StripContact::centre_line`]).
     pub fn fill_record_with(&self, r: &mut StripRecord, detail: StripDetail) {
         let tables = &*self.tables;
         let t = &tables.table;
         let (g, s) = t.locate(self.z_a_m);
         let lerp = |a: &[f64]| (1.0 - s) * a[g] + s * a[g + 1];
-        let (m2, f, x) = (2 * tables.modes, self.force_y_n, &self.x[..]);
+        let (f, x) = (self.force_y_n, &self.x[..]);
         // Top displacement under the wheel (dynamic + bulge), total bottom reaction.
         let [c0, c1] = dot2([t.c_row(g), t.c_row(g + 1)], x);
         let u_w = lerp(&t.d_ww) * f + lerp(&self.bulge_w) + ((1.0 - s) * c0 + s * c1);
@@ -848,25 +855,91 @@ impl StripContact {
         r.bottom_force_n = -reaction_sum;
         r.top_displacement_m = u_w;
         let n_cl = tables.cl_rows.len();
+        r.n_centreline = n_cl as u32;
+        r.modal_len = 0;
+        match detail {
+            StripDetail::UnderWheel => {
+                // The nodes the pressure under the wheel interpolates between (the first node
+                // at or after the wheel's z and the one before it), each bit for bit the full
+                // record's (`dot4` is `dot` row by row); the others, the top line and the maximum
+                // are not computed.
+                let m2 = 2 * tables.modes;
+                let (d0, d1) = (&t.d_cl[g * n_cl..(g + 1) * n_cl], &t.d_cl[(g + 1) * n_cl..(g + 2) * n_cl]);
+                let row = |c: usize| &tables.ccl[c * m2..(c + 1) * m2];
+                let j = tables.cl_z_m.partition_point(|&zn| zn <= self.z_a_m);
+                r.centreline_pressure_pa[..n_cl].fill(0.0);
+                r.top_centreline_uy_m[..n_cl].fill(0.0);
+                for c in j.saturating_sub(1)..(j + 1).min(n_cl) {
+                    let reaction = dot(row(c), x) + ((1.0 - s) * d0[c] + s * d1[c]) * f + self.cl_bulge_n[c];
+                    r.centreline_pressure_pa[c] = reaction / tables.cl_area_m2[c];
+                }
+                r.max_bottom_pressure_pa = f64::NAN;
+            }
+            StripDetail::Modal if x.len() <= MAX_MODAL_STATE => {
+                r.modal_state[..x.len()].copy_from_slice(x);
+                r.modal_len = x.len() as u32;
+                // The writer thread's to fill in, with the centre line.
+                r.max_bottom_pressure_pa = f64::NAN;
+            }
+            StripDetail::Full | StripDetail::Modal => self.centre_line_parts().expand(x, true, r),
+            StripDetail::NoTopLine => self.centre_line_parts().expand(x, false, r),
+        }
+    }
+
+    /// What the centre line is computed from besides the state: the tables and this contact's
+    /// bump terms (borrowed: the loop's own expansion).
+    fn centre_line_parts(&self) -> CentreLineParts<'_> {
+        CentreLineParts { tables: &self.tables, cl_bulge_n: &self.cl_bulge_n, tcl_bulge_m: &self.tcl_bulge_m }
+    }
+
+    /// The centre line from the strip's state, for the recorder's writer thread: records made
+    /// with [`StripDetail::Modal`] carry the state, and this fills in their centre line with the
+    /// same code, so the recording is bit for bit the one the loop would have written. None when
+    /// the state is longer than a record holds (`recordings::MAX_MODAL_STATE`): the loop keeps
+    /// computing it then.
+    pub fn centre_line(&self) -> Option<CentreLine> {
+        (self.x.len() <= MAX_MODAL_STATE).then(|| CentreLine {
+            tables: self.tables.clone(),
+            cl_bulge_n: self.cl_bulge_n.clone(),
+            tcl_bulge_m: self.tcl_bulge_m.clone(),
+        })
+    }
+}
+
+/// A contact's centre line from its state, off the loop ([`StripContact::centre_line`]).
+#[derive(Debug)]
+pub struct CentreLine {
+    tables: Arc<StripTables>,
+    cl_bulge_n: Vec<f64>,
+    tcl_bulge_m: Vec<f64>,
+}
+
+impl recordings::CentreLineFromState for CentreLine {
+    fn expand(&self, state: &[f64], top_line: bool, r: &mut StripRecord) {
+        CentreLineParts { tables: &self.tables, cl_bulge_n: &self.cl_bulge_n, tcl_bulge_m: &self.tcl_bulge_m }.expand(state, top_line, r);
+    }
+}
+
+/// The tables and bump terms the centre line needs, wherever it is computed.
+struct CentreLineParts<'a> {
+    tables: &'a StripTables,
+    cl_bulge_n: &'a [f64],
+    tcl_bulge_m: &'a [f64],
+}
+
+impl CentreLineParts<'_> {
+    /// Every centre-line node's bottom pressure and their maximum, and with `top_line` the top
+    /// line's displacement (else zeros), from the state `x` and `r`'s wheel z and contact force:
+    /// O(centre-line nodes × modes).
+    fn expand(&self, x: &[f64], top_line: bool, r: &mut StripRecord) {
+        let tables = self.tables;
+        let t = &tables.table;
+        let (g, s) = t.locate(r.wheel_z_m);
+        let (m2, f) = (2 * tables.modes, r.contact_force_n);
+        let n_cl = tables.cl_rows.len();
         let (d0, d1) = (&t.d_cl[g * n_cl..(g + 1) * n_cl], &t.d_cl[(g + 1) * n_cl..(g + 2) * n_cl]);
         // Centre-line reactions from the state, four rows per pass over x.
         let row = |c: usize| &tables.ccl[c * m2..(c + 1) * m2];
-        if detail == StripDetail::UnderWheel {
-            // The nodes the pressure under the wheel interpolates between (the first node
-            // at or after the wheel's z and the one before it), each bit for bit the full
-            // record's (`dot4` is `dot` row by row); the others, the top line and the maximum
-            // are not computed.
-            let j = tables.cl_z_m.partition_point(|&zn| zn <= self.z_a_m);
-            r.centreline_pressure_pa[..n_cl].fill(0.0);
-            r.top_centreline_uy_m[..n_cl].fill(0.0);
-            for c in j.saturating_sub(1)..(j + 1).min(n_cl) {
-                let reaction = dot(row(c), x) + ((1.0 - s) * d0[c] + s * d1[c]) * f + self.cl_bulge_n[c];
-                r.centreline_pressure_pa[c] = reaction / tables.cl_area_m2[c];
-            }
-            r.n_centreline = n_cl as u32;
-            r.max_bottom_pressure_pa = f64::NAN;
-            return;
-        }
         let mut c = 0;
         while c + 4 <= n_cl {
             let y = dot4([row(c), row(c + 1), row(c + 2), row(c + 3)], x);
@@ -883,9 +956,8 @@ impl StripContact {
             r.centreline_pressure_pa[c] = p;
             pmax = pmax.max(p);
         }
-        r.n_centreline = n_cl as u32;
         r.max_bottom_pressure_pa = if n_cl > 0 { pmax } else { 0.0 };
-        if detail == StripDetail::NoTopLine {
+        if !top_line {
             r.top_centreline_uy_m[..n_cl].fill(0.0);
             return;
         }
@@ -995,6 +1067,48 @@ pub(crate) mod tests {
             assert_eq!(no_top.max_bottom_pressure_pa.to_bits(), full.max_bottom_pressure_pa.to_bits(), "z = {z}");
             assert!(no_top.top_centreline_uy_m[..n].iter().all(|&u| u == 0.0) && full.top_centreline_uy_m[..n].iter().any(|&u| u != 0.0));
         }
+    }
+
+    /// A modal record carries the full record's scalars and the strip's state, and the writer
+    /// thread's expansion of it ([`StripContact::centre_line`]) gives the full record's centre
+    /// line, maximum and top line bit for bit, or the no-top-line record's without the top line;
+    /// a state longer than a record holds gets the full record instead.
+    #[test]
+    fn the_writer_threads_centre_line_from_the_modal_record_is_the_loops_bit_for_bit() {
+        use recordings::CentreLineFromState;
+        let model = coarse();
+        for z in [0.010, 0.010 + 0.37 * TABLE_STEP_M, 0.02] {
+            let c = run_hold(&model, 1e-4, z, STRIP_TOP_HEIGHT_M - 0.2e-3, 0.05);
+            let (mut full, mut no_top, mut modal) = (StripRecord::default(), StripRecord::default(), StripRecord::default());
+            c.fill_record(&mut full);
+            c.fill_record_with(&mut no_top, StripDetail::NoTopLine);
+            c.fill_record_with(&mut modal, StripDetail::Modal);
+            let bits = |r: &StripRecord| [r.wheel_z_m, r.contact_force_n, r.bottom_force_n, r.top_displacement_m].map(f64::to_bits);
+            assert_eq!((bits(&modal), modal.n_centreline), (bits(&full), full.n_centreline), "z = {z}");
+            assert_eq!(modal.modal_len as usize, c.x.len(), "z = {z}: the whole state");
+            assert_eq!(modal.modal_state[..c.x.len()], c.x[..], "z = {z}");
+            assert!(modal.max_bottom_pressure_pa.is_nan(), "z = {z}: the maximum is the writer's");
+            assert_eq!((full.modal_len, no_top.modal_len), (0, 0));
+            let line = c.centre_line().expect("the coarse model's state fits a record");
+            let n = full.n_centreline as usize;
+            let p = |r: &StripRecord| r.centreline_pressure_pa[..n].iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let u = |r: &StripRecord| r.top_centreline_uy_m[..n].iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            for (top_line, want) in [(true, &full), (false, &no_top)] {
+                let mut r = modal;
+                line.expand(&modal.modal_state[..modal.modal_len as usize], top_line, &mut r);
+                assert_eq!((p(&r), u(&r)), (p(want), u(want)), "z = {z}, top line {top_line}");
+                assert_eq!(r.max_bottom_pressure_pa.to_bits(), want.max_bottom_pressure_pa.to_bits(), "z = {z}");
+            }
+            assert!(full.centreline_pressure_pa[..n].iter().any(|&x| x != 0.0) && full.top_centreline_uy_m[..n].iter().any(|&x| x != 0.0));
+        }
+        // A state a record cannot hold: no writer-side centre line, and the full record.
+        let mut c = run_hold(&model, 1e-4, 0.010, STRIP_TOP_HEIGHT_M - 0.2e-3, 0.05);
+        c.x.resize(MAX_MODAL_STATE + 2, 0.0);
+        assert!(c.centre_line().is_none());
+        let mut r = StripRecord::default();
+        c.fill_record_with(&mut r, StripDetail::Modal);
+        assert_eq!(r.modal_len, 0);
+        assert!(r.max_bottom_pressure_pa.is_finite());
     }
 
     /// Wheel held at a fixed depth: the steady force solves p = k (H + w·u_bulge − y − C_s p)

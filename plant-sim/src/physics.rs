@@ -465,6 +465,14 @@ impl Physics {
         self.contact.as_ref().is_some_and(|c| c.in_contact()) || self.chain.as_ref().is_some_and(|c| c.in_contact())
     }
 
+    /// The strip's centre line from its state, for the recorder's writer thread (records of
+    /// [`crate::contact::StripDetail::Modal`]): the single-model strip's whose state a record
+    /// holds; None otherwise (the loop fills the centre line in).
+    pub fn centre_line(&self) -> Option<std::sync::Arc<dyn recordings::CentreLineFromState>> {
+        let c = self.contact.as_ref()?.centre_line()?;
+        Some(std::sync::Arc::new(c))
+    }
+
     /// The windowed long strip's contact, if the scenario has one.
     pub fn chain(&self) -> Option<&crate::contact::chain::ChainContact> {
         self.chain.as_ref()
@@ -483,6 +491,7 @@ impl Physics {
 
     /// [`Physics::fill_strip_record`] to the given detail (the single-model strip's).
     pub fn fill_strip_record_with(&self, r: &mut recordings::StripRecord, detail: crate::contact::StripDetail) {
+        r.modal_len = 0;
         if let Some(c) = &self.contact {
             c.fill_record_with(r, detail);
             return;

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use scenarios::{Mode, Scenario};
 
+use crate::contact::StripDetail;
 use crate::driver::realtime::{LoopParams, PlantLoop};
 use crate::recording::{EventKind, EventRecord};
 use rig_process::rt;
@@ -159,9 +160,12 @@ pub fn run_reporting(opts: &RunOptions, report: impl FnOnce(&RunSummary)) -> any
     }
     let probe = start_probe(opts, mode, period_ns)?;
 
-    // The strip record's top line only on the ticks the recording draws its scene for.
+    // The strip record's top line only on the ticks the recording draws its scene for; its
+    // centre line on the writer thread when the recorder can compute it (nothing else here reads
+    // it).
     let top_line_every = recorder.as_ref().and_then(|r| r.scene_every());
-    let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode).with_top_line_every(top_line_every);
+    let detail = if recorder.as_ref().is_some_and(|r| r.expands_centre_line()) { StripDetail::Modal } else { StripDetail::Full };
+    let mut plant = crate::tick::PlantTick::new(&scenario, physics, mode).with_strip_detail(detail).with_top_line_every(top_line_every);
     // [egm] enabled: the plant is an ABB robot controller speaking EGM over UDP (`egm/`),
     // instead of taking torques over iceoryx2.
     let (stats, egm) = if scenario.egm.enabled {

@@ -239,3 +239,93 @@ fn the_controllers_own_answer_is_recorded_beside_the_applied_torque() {
         assert_eq!(row.commanded, want, "tick {k}");
     }
 }
+
+/// A plant's centre line from its strip state, as a test writes it: the state is the tick
+/// number and then the pressures halved; the centre line is the pressures (twice the state) and,
+/// with the top line, the tick number at every node. It notes which ticks it drew a top line for.
+#[derive(Debug, Default)]
+struct DoubleTheState {
+    top_line_ticks: std::sync::Mutex<Vec<u64>>,
+}
+
+impl recordings::CentreLineFromState for DoubleTheState {
+    fn expand(&self, state: &[f64], top_line: bool, r: &mut recordings::StripRecord) {
+        let n = r.n_centreline as usize;
+        let mut max = f64::NEG_INFINITY;
+        for i in 0..n {
+            r.centreline_pressure_pa[i] = 2.0 * state[1 + i];
+            max = max.max(r.centreline_pressure_pa[i]);
+        }
+        r.max_bottom_pressure_pa = max;
+        r.top_centreline_uy_m[..n].fill(if top_line { state[0] } else { 0.0 });
+        if top_line {
+            self.top_line_ticks.lock().unwrap().push(state[0] as u64);
+        }
+    }
+}
+
+/// Records whose centre line the loop left to the writer (`StripRecord::modal_len`): the writer
+/// fills it in with the plant's `CentreLineFromState` (pressures, maximum; the top line only on
+/// the scene's ticks, every 10th at 100 Hz), and reads back as the loop's own would have; a
+/// writer without the means records them as not computed (NaN), never as zeros.
+#[test]
+fn the_writer_fills_in_the_centre_line_the_loop_left_to_it() {
+    let run = SyntheticRun { ticks: 300, ..Default::default() };
+    let modal = |k: u64| {
+        let mut r = run.tick(k);
+        let n = r.strip.n_centreline as usize;
+        r.strip.modal_state[0] = k as f64;
+        for i in 0..n {
+            r.strip.modal_state[1 + i] = r.strip.centreline_pressure_pa[i] / 2.0;
+        }
+        r.strip.modal_len = 1 + n as u32;
+        r.strip.centreline_pressure_pa = [0.0; recordings::MAX_CENTRELINE];
+        r.strip.max_bottom_pressure_pa = f64::NAN;
+        r
+    };
+    let from_state = std::sync::Arc::new(DoubleTheState::default());
+    let path = tmp("centre-line-from-state.mcap");
+    let mut cfg = small_chunks(&path, &run);
+    cfg.centre_line = Some(from_state.clone());
+    cfg.scene = Some(recordings::scene::SceneConfig {
+        rate_hz: 100.0,
+        tool: Default::default(),
+        task_in_base: nalgebra::Isometry3::identity(),
+        strip: None,
+        path: None,
+        band_base: Vec::new(),
+    });
+    let mut rec = Recorder::start(cfg).unwrap();
+    assert!(rec.expands_centre_line());
+    for k in 0..run.ticks {
+        assert!(rec.record_tick(&modal(k)));
+    }
+    rec.finish().unwrap();
+    let back = Recording::open_complete(&path).unwrap();
+    assert_eq!(back.strip.len() as u64, run.ticks);
+    for (k, row) in back.strip.iter().enumerate() {
+        let want = run.tick(k as u64).strip;
+        let n = want.n_centreline as usize;
+        let p: Vec<f32> = want.centreline_pressure_pa[..n].iter().map(|&p| p as f32).collect();
+        assert_eq!(row.centreline_pressure_pa, p, "tick {k}");
+        assert_eq!(row.max_bottom_pressure_pa, want.max_bottom_pressure_pa, "tick {k}");
+        assert_eq!(row.wheel_z_m, want.wheel_z_m, "tick {k}");
+    }
+    let drawn = from_state.top_line_ticks.lock().unwrap().clone();
+    assert_eq!(drawn, (0..run.ticks).step_by(10).collect::<Vec<_>>(), "top lines only on the scene's ticks");
+
+    // No means to compute it: NaN pressures and maximum, the rest as recorded.
+    let path = tmp("centre-line-no-means.mcap");
+    let mut rec = Recorder::start(small_chunks(&path, &run)).unwrap();
+    assert!(!rec.expands_centre_line());
+    for k in 0..20 {
+        assert!(rec.record_tick(&modal(k)));
+    }
+    rec.finish().unwrap();
+    let back = Recording::open_complete(&path).unwrap();
+    assert_eq!(back.strip.len(), 20);
+    for (k, row) in back.strip.iter().enumerate() {
+        assert!(row.max_bottom_pressure_pa.is_nan() && row.centreline_pressure_pa.iter().all(|p| p.is_nan()), "tick {k}");
+        assert_eq!(row.wheel_z_m, run.tick(k as u64).strip.wheel_z_m);
+    }
+}

@@ -24,12 +24,16 @@ mod writer;
 pub use live::{LiveConfig, LiveSummary};
 pub use plant_summary::PlantSummary;
 pub use run_metadata::{RunMetadata, EGM_METADATA_KEY};
-pub use writer::{Recorder, RecorderConfig, RecorderError, RecorderTuning, RecordingSummary};
+pub use writer::{CentreLineFromState, Recorder, RecorderConfig, RecorderError, RecorderTuning, RecordingSummary};
 
 use messages::{ControllerDiagnostics, JointState, JointTorque, Wrench, DOF};
 
 /// Most centre-line nodes a [`StripRecord`] carries (the 0.5 mm mesh of a 40 mm strip has 81).
 pub const MAX_CENTRELINE: usize = 256;
+
+/// Longest strip state a [`StripRecord`] carries for the writer thread ([`StripRecord::modal_len`];
+/// the default model's has 500: 250 complex modes).
+pub const MAX_MODAL_STATE: usize = 512;
 
 /// `/joint_torque.controller_status` of a tick for which no answer arrived (the wire's statuses
 /// are 0 to 2, `messages::ControllerStatus`): the torque was held or the safe stop's.
@@ -102,6 +106,13 @@ pub struct StripRecord {
     /// at the same z as `centreline_pressure_pa`, m, bulge included; `n_centreline` valid. Drawn
     /// by the decimated `/strip_scene` only (the per-tick `/strip` schema is unchanged).
     pub top_centreline_uy_m: [f64; MAX_CENTRELINE],
+    /// Nonzero: the loop left the centre line (`centreline_pressure_pa`, `top_centreline_uy_m`,
+    /// `max_bottom_pressure_pa`) to the writer thread, which computes it from the strip's state
+    /// `modal_state[..modal_len]` and the scalars above with the plant's [`CentreLineFromState`]
+    /// (issue 22: those n_centreline dot products over the state were a seventh of the lockstep
+    /// loop's CPU). Zero: the centre line is filled in.
+    pub modal_len: u32,
+    pub modal_state: [f64; MAX_MODAL_STATE],
 }
 
 /// Loop timing of one tick. Wall-clock times are CLOCK_REALTIME ns since the Unix epoch.
@@ -357,6 +368,8 @@ impl Default for StripRecord {
             centreline_dz_m: 0.0,
             centreline_pressure_pa: [0.0; MAX_CENTRELINE],
             top_centreline_uy_m: [0.0; MAX_CENTRELINE],
+            modal_len: 0,
+            modal_state: [0.0; MAX_MODAL_STATE],
         }
     }
 }

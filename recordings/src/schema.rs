@@ -341,6 +341,8 @@ pub struct StripHead {
     /// [`crate::StripRecord::centreline_z0_m`], `centreline_dz_m`: the nodes' z when they move.
     pub centreline_z0_m: f64,
     pub centreline_dz_m: f64,
+    /// [`crate::StripRecord::modal_len`]: nonzero until the writer has filled in the centre line.
+    pub modal_len: u32,
 }
 
 impl TickHead {
@@ -364,6 +366,7 @@ impl TickHead {
                 n_centreline: (s.n_centreline as usize).min(MAX_CENTRELINE) as u32,
                 centreline_z0_m: s.centreline_z0_m,
                 centreline_dz_m: s.centreline_dz_m,
+                modal_len: (s.modal_len as usize).min(crate::MAX_MODAL_STATE) as u32,
             },
             timing: r.timing,
         }

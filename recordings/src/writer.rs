@@ -21,7 +21,9 @@
 use crate::live::{LiveChannel, LiveConfig, LiveError, LiveSummary, LiveView};
 use crate::run_metadata::RunMetadata;
 use crate::schema::{self, Channel, TickHead, CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING};
-use crate::{error_chain, sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, MAX_CENTRELINE, RECORDING_FORMAT_VERSION};
+use crate::{
+    error_chain, sim_time_ns, wall_clock_ns, EventKind, EventRecord, TickRecord, MAX_CENTRELINE, MAX_MODAL_STATE, RECORDING_FORMAT_VERSION,
+};
 use mcap::records::{op, MessageHeader, Metadata};
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -54,6 +56,19 @@ pub struct RecorderConfig {
     pub scene: Option<crate::scene::SceneConfig>,
     /// Control period, s: the decimation of the scene (every `round(1 / (rate T))`-th tick).
     pub period_s: f64,
+    /// The plant's centre line from its strip's state: with it, a tick whose record carries
+    /// its state ([`crate::StripRecord::modal_len`]) gets its centre line computed here, on the
+    /// writer thread, instead of on the loop's. None: records come with their centre line.
+    pub centre_line: Option<Arc<dyn CentreLineFromState>>,
+}
+
+/// A strip record's centre line from the strip's state, for the writer thread (the plant's
+/// contact implements it with its own tables, so the bits are the loop's would have been).
+pub trait CentreLineFromState: Send + Sync + std::fmt::Debug {
+    /// Fill `r.centreline_pressure_pa[..r.n_centreline]`, `r.max_bottom_pressure_pa` and, when
+    /// `top_line`, `r.top_centreline_uy_m[..r.n_centreline]` (else zeros there) from the strip's
+    /// `state` and `r`'s scalars (`wheel_z_m`, `contact_force_n`), as the loop would have.
+    fn expand(&self, state: &[f64], top_line: bool, r: &mut crate::StripRecord);
 }
 
 impl RecorderConfig {
@@ -69,6 +84,7 @@ impl RecorderConfig {
             live: None,
             scene: None,
             period_s: 1e-3,
+            centre_line: None,
         }
     }
 }
@@ -162,6 +178,8 @@ pub struct RecordingSummary {
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Kind {
     Tick,
+    /// A tick whose centre line the writer computes from the strip state in the slot.
+    TickState,
     Event,
     Egm,
 }
@@ -177,6 +195,19 @@ struct Slot {
     /// An event or an EGM cycle (by `kind`): they share the space, so `/egm` does not make a
     /// slot larger.
     small: MaybeUninit<Small>,
+    centre_line: CentreLineSlot,
+}
+
+/// A tick's centre line (`Kind::Tick`) or the strip state it is computed from
+/// (`Kind::TickState`): they share the space (the state's 4 KB, twice the centre line's).
+#[derive(Clone, Copy)]
+union CentreLineSlot {
+    expanded: ExpandedSlot,
+    state: [MaybeUninit<f64>; MAX_MODAL_STATE],
+}
+
+#[derive(Clone, Copy)]
+struct ExpandedSlot {
     pressure_pa: [MaybeUninit<f32>; MAX_CENTRELINE],
     top_uy_m: [MaybeUninit<f32>; MAX_CENTRELINE],
 }
@@ -205,6 +236,8 @@ pub struct Recorder {
     live_addr: Option<std::net::SocketAddr>,
     /// Every how many ticks the writer draws the scene; None without one.
     scene_every: Option<u64>,
+    /// Whether the writer computes a record's centre line from its strip state.
+    expands_centre_line: bool,
 }
 
 type McapFile = mcap::Writer<BufWriter<SlicedFile>>;
@@ -371,8 +404,12 @@ impl Recorder {
             kind: Kind::Event,
             tick: MaybeUninit::new(TickHead::of(&TickRecord::default())),
             small: MaybeUninit::new(Small { event: EventRecord::new(0, 0.0, EventKind::Info, "") }),
-            pressure_pa: [MaybeUninit::new(0.0); MAX_CENTRELINE],
-            top_uy_m: [MaybeUninit::new(0.0); MAX_CENTRELINE],
+            centre_line: CentreLineSlot {
+                expanded: ExpandedSlot {
+                    pressure_pa: [MaybeUninit::new(0.0); MAX_CENTRELINE],
+                    top_uy_m: [MaybeUninit::new(0.0); MAX_CENTRELINE],
+                },
+            },
         };
         for _ in 0..cfg.queue_capacity {
             let _ = producer.push(blank);
@@ -390,6 +427,7 @@ impl Recorder {
             moving_z: Vec::with_capacity(MAX_CENTRELINE),
             pressure: Vec::with_capacity(MAX_CENTRELINE),
             top_uy: Vec::with_capacity(MAX_CENTRELINE),
+            centre_line: cfg.centre_line.clone().map(|c| (c, Box::default())),
             bond_peak: match cfg.scene.as_ref() {
                 Some(sc) if sc.path.is_some() => {
                     vec![0.0; sc.strip.as_ref().map_or(0, |g| (g.length_m / crate::scene::SCENE_BOND_STEP_M).round() as usize + 1)]
@@ -428,7 +466,8 @@ impl Recorder {
             .name("recorder".into())
             .spawn(move || writer.run())
             .map_err(|source| RecorderError::Create { path: path.clone(), cause: source })?;
-        Ok(Self { producer: Some(producer), shared, thread: Some(thread), path, live_addr, scene_every })
+        let expands_centre_line = cfg.centre_line.is_some();
+        Ok(Self { producer: Some(producer), shared, thread: Some(thread), path, live_addr, scene_every, expands_centre_line })
     }
 
     /// Every how many ticks the writer draws the 3D scene (ticks whose `state.tick` is a
@@ -436,6 +475,13 @@ impl Recorder {
     /// top line is never read.
     pub fn scene_every(&self) -> Option<u64> {
         self.scene_every
+    }
+
+    /// Whether this recorder computes a record's centre line from the strip state it carries
+    /// ([`RecorderConfig::centre_line`]): a loop whose records are read by nobody else may then
+    /// leave the centre line to the writer thread.
+    pub fn expands_centre_line(&self) -> bool {
+        self.expands_centre_line
     }
 
     /// Queues one tick. Wait-free; returns false (and counts a drop) if the queue is full.
@@ -457,21 +503,30 @@ impl Recorder {
         };
         let slot = chunk.as_mut_slices().0[0].as_mut_ptr();
         let n = (r.strip.n_centreline as usize).min(MAX_CENTRELINE);
+        let m = (r.strip.modal_len as usize).min(MAX_MODAL_STATE);
         // SAFETY: `slot` points to one slot reserved for us. We write `kind` (the only field
-        // without MaybeUninit, so the slot is a valid Slot afterwards), the tick head and the
-        // first n pressures; the reader reads exactly those for a Kind::Tick slot.
+        // without MaybeUninit, so the slot is a valid Slot afterwards), the tick head and either
+        // the first n pressures and top displacements (Kind::Tick) or the first m entries of the
+        // strip state (Kind::TickState); the reader reads exactly those for that kind.
         unsafe {
-            std::ptr::addr_of_mut!((*slot).kind).write(Kind::Tick);
             let mut head = TickHead::of(r);
             head.commanded = commanded.map(|t| t.tau);
             std::ptr::addr_of_mut!((*slot).tick).write(MaybeUninit::new(head));
-            let dst = std::ptr::addr_of_mut!((*slot).pressure_pa) as *mut f32;
-            for (i, &v) in r.strip.centreline_pressure_pa[..n].iter().enumerate() {
-                dst.add(i).write(v as f32);
-            }
-            let dst = std::ptr::addr_of_mut!((*slot).top_uy_m) as *mut f32;
-            for (i, &v) in r.strip.top_centreline_uy_m[..n].iter().enumerate() {
-                dst.add(i).write(v as f32);
+            let centre_line = std::ptr::addr_of_mut!((*slot).centre_line);
+            if m > 0 {
+                std::ptr::addr_of_mut!((*slot).kind).write(Kind::TickState);
+                let dst = std::ptr::addr_of_mut!((*centre_line).state) as *mut f64;
+                std::ptr::copy_nonoverlapping(r.strip.modal_state.as_ptr(), dst, m);
+            } else {
+                std::ptr::addr_of_mut!((*slot).kind).write(Kind::Tick);
+                let dst = std::ptr::addr_of_mut!((*centre_line).expanded.pressure_pa) as *mut f32;
+                for (i, &v) in r.strip.centreline_pressure_pa[..n].iter().enumerate() {
+                    dst.add(i).write(v as f32);
+                }
+                let dst = std::ptr::addr_of_mut!((*centre_line).expanded.top_uy_m) as *mut f32;
+                for (i, &v) in r.strip.top_centreline_uy_m[..n].iter().enumerate() {
+                    dst.add(i).write(v as f32);
+                }
             }
             chunk.commit(1);
         }
@@ -607,6 +662,8 @@ struct WriterThread {
     pressure: Vec<f32>,
     /// Top centre-line displacements of the tick being written.
     top_uy: Vec<f32>,
+    /// The plant's centre line from the strip state, with the record it fills (one, reused).
+    centre_line: Option<(Arc<dyn CentreLineFromState>, Box<crate::StripRecord>)>,
     /// A contour's scene: the peak centre-line pressure per millimetre so far (every tick's, not
     /// just the scene's ticks); empty otherwise.
     bond_peak: Vec<f32>,
@@ -703,20 +760,50 @@ impl WriterThread {
 
     /// Takes the next slot: the tick head is copied out, its pressures go to `self.pressure`.
     fn pop(&mut self) -> Option<Popped> {
-        let Self { consumer, pressure, top_uy, moving_z, .. } = self;
+        let Self { consumer, pressure, top_uy, moving_z, centre_line, scene, scene_every, .. } = self;
         let chunk = consumer.read_chunk(1).ok()?;
         let slot = &chunk.as_slices().0[0];
         let item = match slot.kind {
-            Kind::Tick => {
-                // SAFETY: record_tick wrote the head and the first n_centreline pressures.
-                let head = unsafe { slot.tick.assume_init() };
+            Kind::Tick | Kind::TickState => {
+                // SAFETY: record_tick wrote the head.
+                let mut head = unsafe { slot.tick.assume_init() };
                 let n = head.strip.n_centreline as usize;
                 pressure.clear();
-                // SAFETY: record_tick wrote the first n_centreline pressures.
-                pressure.extend(slot.pressure_pa[..n].iter().map(|p| unsafe { p.assume_init() }));
                 top_uy.clear();
-                // SAFETY: record_tick wrote the first n_centreline top displacements.
-                top_uy.extend(slot.top_uy_m[..n].iter().map(|p| unsafe { p.assume_init() }));
+                match (slot.kind, centre_line.as_mut()) {
+                    (Kind::TickState, Some((from_state, r))) => {
+                        let m = head.strip.modal_len as usize;
+                        // SAFETY: record_tick wrote the first modal_len entries of the state
+                        // (a Kind::TickState slot), and MaybeUninit<f64> has f64's layout.
+                        let state = unsafe { &*(&slot.centre_line.state[..m] as *const [MaybeUninit<f64>] as *const [f64]) };
+                        r.wheel_z_m = head.strip.wheel_z_m;
+                        r.contact_force_n = head.strip.contact_force_n;
+                        r.n_centreline = n as u32;
+                        // The top line only where the scene draws it, as the loop would have.
+                        let top_line = scene.is_some() && head.state.tick.is_multiple_of(*scene_every);
+                        from_state.expand(state, top_line, r);
+                        head.strip.max_bottom_pressure_pa = r.max_bottom_pressure_pa;
+                        pressure.extend(r.centreline_pressure_pa[..n].iter().map(|&p| p as f32));
+                        top_uy.extend(r.top_centreline_uy_m[..n].iter().map(|&u| u as f32));
+                    }
+                    (Kind::TickState, None) => {
+                        // A plant that left its centre line to a writer without the means:
+                        // recorded as not computed.
+                        head.strip.max_bottom_pressure_pa = f64::NAN;
+                        pressure.resize(n, f32::NAN);
+                        top_uy.resize(n, f32::NAN);
+                    }
+                    _ => {
+                        // SAFETY: a Kind::Tick slot holds the expanded centre line, whose first
+                        // n_centreline pressures and top displacements record_tick wrote.
+                        let e = unsafe { &slot.centre_line.expanded };
+                        // SAFETY: as above.
+                        pressure.extend(e.pressure_pa[..n].iter().map(|p| unsafe { p.assume_init() }));
+                        // SAFETY: as above.
+                        top_uy.extend(e.top_uy_m[..n].iter().map(|p| unsafe { p.assume_init() }));
+                    }
+                }
+                head.strip.modal_len = 0;
                 moving_z.clear();
                 let (z0, dz) = (head.strip.centreline_z0_m, head.strip.centreline_dz_m);
                 if dz > 0.0 {

@@ -114,6 +114,46 @@ fn the_top_line_on_scene_ticks_only_changes_nothing_the_recording_reads() {
     assert!(top_seen, "the strip deformed under the wheel on some scene tick");
 }
 
+/// A plant that leaves its centre line to the recorder's writer thread
+/// (`StripDetail::Modal`) and the writer's expansion of its records (the plant's own
+/// `centre_line`, the top line on scene ticks as the writer decides them) give every tick's
+/// scalars, pressures, maximum and scene-tick top line of a plant that fills them in, bit for
+/// bit. The default scenario through its roll (1,500 ticks).
+#[test]
+fn the_centre_line_computed_on_the_writer_thread_is_the_loops() {
+    let s = scenarios::Scenario::load(&scenario_path("default")).unwrap();
+    let cache = strip::cache::cache_dir();
+    let every = 10;
+    let mut full = plant_sim::PlantTick::from_scenario(&s, &cache, scenarios::Mode::Lockstep).unwrap().with_top_line_every(Some(every));
+    let mut modal = plant_sim::PlantTick::from_scenario(&s, &cache, scenarios::Mode::Lockstep)
+        .unwrap()
+        .with_strip_detail(plant_sim::contact::StripDetail::Modal)
+        .with_top_line_every(Some(every));
+    let line = modal.physics().centre_line().expect("the default strip's state fits a record");
+    let mut controller = controller::Controller::from_scenario(&s).with_id(1);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let mut pressed = false;
+    for tick in 0..1500u64 {
+        let (state, wrench) = full.outputs();
+        assert_eq!(format!("{:?}", (state, wrench)), format!("{:?}", modal.outputs()), "tick {tick}: outputs");
+        let (torque, _) = controller.process(&state, &wrench);
+        let (a, mut b) = (full.advance(Some(&torque)).strip, modal.advance(Some(&torque)).strip);
+        assert!(b.modal_len > 0 && a.modal_len == 0, "tick {tick}");
+        let state = b.modal_state;
+        line.expand(&state[..b.modal_len as usize], tick % every == 0, &mut b);
+        let n = a.n_centreline as usize;
+        assert!(n > 0 && b.n_centreline as usize == n, "tick {tick}");
+        let scalars = |r: &plant_sim::recording::StripRecord| {
+            bits(&[r.wheel_z_m, r.contact_force_n, r.bottom_force_n, r.max_bottom_pressure_pa, r.top_displacement_m])
+        };
+        assert_eq!(scalars(&b), scalars(&a), "tick {tick}: scalars");
+        assert_eq!(bits(&b.centreline_pressure_pa[..n]), bits(&a.centreline_pressure_pa[..n]), "tick {tick}: pressures");
+        assert_eq!(bits(&b.top_centreline_uy_m[..n]), bits(&a.top_centreline_uy_m[..n]), "tick {tick}: top line");
+        pressed |= a.max_bottom_pressure_pa > 50e3;
+    }
+    assert!(pressed, "the wheel pressed the strip");
+}
+
 /// A controller whose wrench subscriber connected after the plant had sent tick 0's wrench
 /// answered tick 0 with a zero wrench, which the cell's tare then averaged in: 3 of 12 lockstep
 /// runs of `cell.toml` gave another digest (2026-12-06). The controller now waits for the plant's

@@ -80,6 +80,7 @@ pub fn open_recorder_with(
         live,
         scene: Some(scene_config(scenario, physics.contact(), physics.chain())),
         period_s: l.period_s,
+        centre_line: physics.centre_line(),
     };
     Recorder::start_with(cfg, tuning).with_context(|| format!("starting the recorder on {}", path.display()))
 }
