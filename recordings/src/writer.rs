@@ -184,10 +184,11 @@ enum Kind {
     Egm,
 }
 
-/// One queue slot, written in place by the loop thread: the kind, then either the tick head and
-/// only the valid centre-line pressures (as f32, the file's precision) or the event. Leaving the
-/// rest untouched keeps the push to about 1 KB of stores for an 81-node centre line instead of a
-/// 2.6 KB copy (the benchmark's p99 target is 2 us).
+/// One queue slot (5,160 bytes), written in place by the loop thread: the kind, then either the
+/// tick head and only the valid centre-line pressures (as f32, the file's precision) or the
+/// strip state the writer computes them from, or the event. Leaving the rest untouched keeps the
+/// push to about 1 KB of stores for an 81-node centre line (4 KB for the default strip's state)
+/// instead of a copy of the whole slot (the benchmark's p99 target is 2 us).
 #[derive(Clone, Copy)]
 struct Slot {
     kind: Kind,

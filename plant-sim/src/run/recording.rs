@@ -34,8 +34,9 @@ pub fn open_recorder(
 
 /// Largest recorder queue in lockstep, records. Lockstep has no deadline: the loop waits for
 /// room (`tick.rs`) instead of dropping, so the queue need not absorb a stalled writer, and the
-/// start need not touch `recording.queue_capacity` slots of about 3.5 kB each (8192 by default:
-/// 28 MB, 17-25 ms of the start on the idle VM, 2026-12-04).
+/// start need not touch `recording.queue_capacity` slots of 5.2 kB each (8192 by default: 42 MB;
+/// at 3.5 kB a slot, 28 MB took 17-25 ms of the start on the idle VM, 2026-12-04; the strip
+/// state a slot may carry since 2026-12-07 added 2 kB).
 const LOCKSTEP_QUEUE_CAPACITY: usize = 1024;
 
 /// [`open_recorder`] with the writer's `tuning`.
